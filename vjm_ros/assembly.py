@@ -1,0 +1,84 @@
+"""Assembly: solve the dependent coordinates so that the closures hold.
+
+Given the driving coordinates (kept fixed) and guesses for the others, a damped Gauss-Newton
+iteration with minimum-norm steps solves ``C(q) = 0``; the rates of the free coordinates are then
+corrected by the least change that makes ``A qd = 0``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .constraints import ClosureSet
+from .kinematics import forward_kinematics
+from .model import Model
+
+
+def closure_residual(model: Model, q: np.ndarray) -> np.ndarray:
+    """Stacked closure residual ``C(q)`` (m or rad).
+
+    Returns
+    -------
+    ndarray, shape (r,)
+    """
+    return ClosureSet(model).evaluate(forward_kinematics(model, q), jacobian=False).residual
+
+
+def assemble(
+    model: Model,
+    fixed: list[int],
+    tolerance: float = 1e-10,
+    max_iterations: int = 100,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Solve the free coordinates so that ``C(q) = 0`` and ``A qd = 0``.
+
+    Parameters
+    ----------
+    model : Model
+        Its initial joint values are the driving values and the guesses.
+    fixed : list of int
+        Coordinates that keep their given value and rate.
+    tolerance : float
+        Largest acceptable ``|C|`` after assembly, m or rad.
+    max_iterations : int
+
+    Returns
+    -------
+    q, qd : ndarray, shape (n,)
+    residual : float
+        ``max |C|`` reached.
+    """
+    closures = ClosureSet(model)
+    q, qd = model.initial_state()
+    if closures.n_rows == 0:
+        return q, qd, 0.0
+    free = np.setdiff1d(np.arange(model.n), np.asarray(fixed, dtype=int))
+
+    def evaluate(qq):
+        return closures.evaluate(forward_kinematics(model, qq, np.zeros(model.n)))
+
+    terms = evaluate(q)
+    err = float(np.max(np.abs(terms.residual)))
+    for _ in range(max_iterations):
+        if err <= 0.01 * tolerance or free.size == 0:
+            break
+        a = terms.jacobian[:, free]
+        step = np.linalg.lstsq(a, -terms.residual, rcond=1e-12)[0]
+        scale = 1.0
+        while scale > 1e-6:
+            trial = q.copy()
+            trial[free] += scale * step
+            t_terms = evaluate(trial)
+            t_err = float(np.max(np.abs(t_terms.residual)))
+            if np.isfinite(t_err) and t_err < err:
+                q, terms, err = trial, t_terms, t_err
+                break
+            scale *= 0.5
+        else:
+            break
+    terms = closures.evaluate(forward_kinematics(model, q, qd))
+    if free.size:
+        a = terms.jacobian[:, free]
+        qd = qd.copy()
+        qd[free] += np.linalg.lstsq(a, -(terms.jacobian @ qd), rcond=1e-12)[0]
+    return q, qd, err

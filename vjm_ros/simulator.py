@@ -1,0 +1,448 @@
+"""The simulation loop without ROS: control ticks, closure settings, sampling, divergence guard.
+
+A control tick of length ``dt = 1 / rate`` holds the efforts constant and advances the physics by
+``substeps`` fixed steps (or one adaptive solve) to ``t + dt`` (DESIGN section 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .constraints import ExactClosure, PenaltyClosure, effective_masses
+from .errors import ConfigurationError, DivergenceError, StiffnessError
+from .integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
+from .kinematics import forward_kinematics, link_segments, point_positions
+from .model import Model
+from .system import Mechanism
+
+THESIS_KP = 1e5
+"""The thesis's closure stiffness (Tables 4.1-4.5, printed as "Ns/m"), N/m."""
+THESIS_KV = 100.0
+"""The thesis's closure damping, N s/m."""
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """How to integrate a scene.
+
+    Attributes
+    ----------
+    integrator : str
+        Registry name (see :data:`vjm_ros.integrators.INTEGRATORS`).
+    closure : str
+        ``"penalty"`` or ``"exact"``.
+    rate : float
+        Control ticks per second, Hz.
+    substeps : int
+        Fixed steps per tick.
+    kp, kv : float or None
+        Raw penalty gains (N/m, N s/m; N m/rad for angle rows). Used when given.
+    omega_n, zeta : float or None
+        Penalty gains as natural frequency (rad/s) and damping ratio per row, through the
+        effective mass at the initial pose. Used when ``kp`` is not given.
+    alpha, beta : float
+        Baumgarte gains of the exact closure, 1/s.
+    projection : bool
+        Exact closure only: project ``q``, ``qd`` onto the closure manifold after each tick.
+    rtol, atol : float
+        Tolerances of adaptive integrators.
+    check_stiffness : bool
+        Refuse penalty gains beyond the integrator's stability bound before running.
+    divergence_limit : float or None
+        Largest closure residual (m or rad) before the run is stopped; None disables the check.
+    """
+
+    integrator: str = "rk4"
+    closure: str = "penalty"
+    rate: float = 1000.0
+    substeps: int = 1
+    kp: float | None = None
+    kv: float | None = None
+    omega_n: float | None = None
+    zeta: float | None = None
+    alpha: float | None = None
+    beta: float | None = None
+    projection: bool = False
+    rtol: float = 1e-9
+    atol: float = 1e-12
+    check_stiffness: bool = True
+    divergence_limit: float | None = None
+
+    def validated(self) -> SimulationSettings:
+        """Check value ranges; raise :class:`ConfigurationError` naming the setting."""
+        if self.closure not in ("penalty", "exact"):
+            raise ConfigurationError(
+                f"closure: expected 'penalty' or 'exact', found {self.closure!r}"
+            )
+        if not (np.isfinite(self.rate) and self.rate > 0):
+            raise ConfigurationError(f"rate: expected a positive number of Hz, found {self.rate!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ConfigurationError(
+                f"substeps: expected a whole number >= 1, found {self.substeps!r}"
+            )
+        for key in ("kp", "kv", "omega_n", "zeta"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        for key in ("alpha", "beta", "rtol", "atol"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        make_integrator(self.integrator)  # raises with the list of known names
+        return self
+
+
+@dataclass
+class Sample:
+    """Everything observable at the end of a tick.
+
+    Attributes
+    ----------
+    t : float
+        Simulated time, s.
+    q, qd, qdd, effort : ndarray, shape (n,)
+        Joint coordinates, rates, accelerations and applied efforts (N m or N).
+    theta : ndarray, shape (n,)
+        Absolute link angles, rad.
+    points : ndarray, shape (n_points, 2)
+        Named point positions, m.
+    closure_force : ndarray, shape (k, 3)
+        World-frame force of each closure on its point ``(Fx, Fy, Mz)``, N / N m.
+    closure_error : ndarray, shape (k,)
+        ``|C|`` per closure, m (rad for angle closures).
+    closure_points : ndarray, shape (k, 2)
+        Point of application of each closure force, m.
+    energy : ndarray, shape (4,)
+        Kinetic, potential, constraint, total, J.
+    power_in : float
+        ``tau . qd``, W.
+    dissipation : float
+        ``sum Kv Cdot^2`` (penalty), W.
+    segments : ndarray, shape (n, 2, 2)
+        Link start/end points for drawing, m.
+    """
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    effort: np.ndarray
+    theta: np.ndarray
+    points: np.ndarray
+    closure_force: np.ndarray
+    closure_error: np.ndarray
+    closure_points: np.ndarray
+    energy: np.ndarray
+    power_in: float
+    dissipation: float
+    segments: np.ndarray
+    sigma_min: float = field(default=np.nan)
+
+    @property
+    def max_closure_error(self) -> float:
+        """Largest closure residual, m (0 without closures)."""
+        return float(self.closure_error.max()) if self.closure_error.size else 0.0
+
+
+class Simulator:
+    """Fixed-rate simulation of one scene.
+
+    Parameters
+    ----------
+    model : Model
+    settings : SimulationSettings
+    scene_gains : dict, optional
+        Gains from the scene file (``kp``, ``kv``, ``omega_n``, ``zeta``, ``alpha``, ``beta``,
+        per-closure overrides under ``per_closure``); settings take precedence.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        settings: SimulationSettings | None = None,
+        scene_gains: dict | None = None,
+    ):
+        self.model = model
+        self.settings = (settings or SimulationSettings()).validated()
+        self.scene_gains = dict(scene_gains or {})
+        self.dt = 1.0 / self.settings.rate
+        self.h = self.dt / self.settings.substeps
+        self.integrator = make_integrator(
+            self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
+        ) if self._adaptive() else make_integrator(self.settings.integrator)
+        self.q0, self.qd0 = model.initial_state()
+        self.selection = model.actuator_matrix()
+        self.limits = np.array([a.limit for a in model.actuators], dtype=float)
+        self.method = self._closure_method()
+        self.mechanism = Mechanism(model, self.method)
+        self.stiffness_report = self._stiffness_report()
+        if self.settings.check_stiffness:
+            self._check_stiffness()
+        self.divergence_limit = self.settings.divergence_limit
+        if self.divergence_limit is None:
+            scale = max(float(np.max(model.length, initial=0.0)), 0.1)
+            self.divergence_limit = 0.25 * scale
+        self.reset()
+
+    # ------------------------------------------------------------------ set-up
+    def _adaptive(self) -> bool:
+        return issubclass(INTEGRATORS[self.settings.integrator], AdaptiveIntegrator)
+
+    def _closure_method(self) -> PenaltyClosure | ExactClosure:
+        s, g = self.settings, self.scene_gains
+        if s.closure == "exact":
+            alpha = s.alpha if s.alpha is not None else g.get("alpha", 20.0)
+            beta = s.beta if s.beta is not None else g.get("beta", 20.0)
+            return ExactClosure(alpha=alpha, beta=beta, projection=s.projection)
+        r = self.model.n_rows
+        kp_raw = s.kp if s.kp is not None else None
+        kv_raw = s.kv if s.kv is not None else None
+        wn = s.omega_n if s.omega_n is not None else None
+        zeta = s.zeta if s.zeta is not None else None
+        if kp_raw is None and wn is None:
+            kp_raw, kv_raw = g.get("kp"), g.get("kv")
+            wn, zeta = g.get("omega_n"), g.get("zeta")
+        if kp_raw is None and wn is None:
+            kp_raw, kv_raw = THESIS_KP, THESIS_KV
+        if kp_raw is not None:
+            kp = np.full(r, float(kp_raw))
+            kv = np.full(r, float(kv_raw if kv_raw is not None else 0.0))
+        else:
+            meff = self._effective_masses()
+            z = float(zeta if zeta is not None else 1.0)
+            kp = meff * float(wn) ** 2
+            kv = 2.0 * z * meff * float(wn)
+        return PenaltyClosure(kp=kp, kv=kv)
+
+    def _effective_masses(self) -> np.ndarray:
+        probe = Mechanism(self.model, ExactClosure())
+        ev = probe.evaluate(self.q0, self.qd0, np.zeros(self.model.n))
+        meff = effective_masses(ev.dyn.mass_matrix, ev.closure.jacobian)
+        return np.where(np.isfinite(meff), meff, 0.0)
+
+    def _stiffness_report(self) -> list[dict]:
+        """Per closure row: effective mass, omega_n, zeta, omega_n h and the method's bound."""
+        if not isinstance(self.method, PenaltyClosure) or self.model.n_rows == 0:
+            return []
+        meff = self._effective_masses()
+        rows = []
+        cache: dict[float, float] = {}
+        names = [c.name for c in self.model.closures for _ in range(c.rows)]
+        for i, name in enumerate(names):
+            kp, kv, m = self.method.kp[i], self.method.kv[i], meff[i]
+            if m <= 0 or kp <= 0:
+                continue
+            wn = float(np.sqrt(kp / m))
+            zeta = float(kv / (2.0 * np.sqrt(kp * m)))
+            if self.integrator.fixed_step:
+                key = round(zeta, 4)
+                if key not in cache:
+                    cache[key] = float(self.integrator.stability_bound(key))
+                bound = cache[key]
+            else:
+                bound = np.inf
+            rows.append(
+                {"closure": name, "row": i, "m_eff": float(m), "omega_n": wn, "zeta": zeta,
+                 "omega_h": wn * self.h, "bound": bound}
+            )
+        return rows
+
+    def _check_stiffness(self) -> None:
+        for row in self.stiffness_report:
+            if row["omega_h"] > row["bound"]:
+                need = int(np.ceil(row["omega_n"] * self.dt / row["bound"])) if row["bound"] > 0 else None
+                hint = (
+                    f"use --substeps {need} or more, " if need else ""
+                ) + "the implicit_euler integrator, or --closure exact"
+                raise StiffnessError(
+                    f"closure '{row['closure']}' row {row['row']}: omega_n = {row['omega_n']:.4g} rad/s "
+                    f"(zeta = {row['zeta']:.3g}, effective mass {row['m_eff']:.4g}) gives omega_n*h = "
+                    f"{row['omega_h']:.3g} with h = {self.h:.3g} s, beyond the stability bound "
+                    f"{row['bound']:.3g} of {self.settings.integrator}; {hint}"
+                )
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Back to the scene's initial state (t = 0, zero efforts)."""
+        self.t = 0.0
+        self.ticks = 0
+        self.q = self.q0.copy()
+        self.qd = self.qd0.copy()
+        self.efforts = np.zeros(len(self.model.actuators))
+        self.tau = np.zeros(self.model.n)
+        self.integrator.reset()
+
+    def set_efforts(self, efforts: np.ndarray) -> np.ndarray:
+        """Hold actuator efforts for the following ticks, clamped to the scene's limits.
+
+        Parameters
+        ----------
+        efforts : array_like, shape (n_actuators,)
+            N m or N, in the scene's actuator order.
+
+        Returns
+        -------
+        ndarray, shape (n_actuators,)
+            The efforts as applied (after clamping).
+        """
+        e = np.asarray(efforts, dtype=float).reshape(-1)
+        if e.shape != (len(self.model.actuators),):
+            raise ConfigurationError(
+                f"efforts: expected {len(self.model.actuators)} values (actuators "
+                f"{self.model.actuator_names}), found {e.size}"
+            )
+        if not np.all(np.isfinite(e)):
+            raise ConfigurationError(f"efforts: expected finite values, found {e.tolist()}")
+        e = np.clip(e, -self.limits, self.limits)
+        self.efforts = e
+        self.tau = self.selection @ e
+        return e
+
+    def advance(self, efforts: np.ndarray | None = None) -> None:
+        """One control tick.
+
+        Parameters
+        ----------
+        efforts : array_like, optional
+            New efforts for this tick (held from now on); the previous ones when omitted.
+
+        Raises
+        ------
+        DivergenceError
+            On a non-finite state or a closure residual beyond the limit.
+        """
+        if efforts is not None:
+            self.set_efforts(efforts)
+        with np.errstate(all="ignore"):
+            try:
+                q, qd = self.integrator.advance(
+                    self.mechanism, self.t, self.q, self.qd, self.tau, self.dt, self.settings.substeps
+                )
+            except (FloatingPointError, np.linalg.LinAlgError) as exc:
+                raise DivergenceError(self.t, str(exc), None, self._likely_cause()) from exc
+        self.ticks += 1
+        self.t = self.ticks * self.dt
+        if isinstance(self.method, ExactClosure) and self.method.projection:
+            q, qd = self.mechanism.project(q, qd)
+            self.integrator.reset()
+        self.q, self.qd = q, qd
+        self._guard()
+
+    def _guard(self) -> None:
+        if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd))):
+            raise DivergenceError(self.t, "the state is no longer finite", None, self._likely_cause())
+        if self.model.n_rows and self.divergence_limit:
+            terms = self.mechanism.closures.evaluate(
+                forward_kinematics(self.model, self.q), jacobian=False
+            )
+            err = self.mechanism.closures.errors(terms)
+            worst = int(np.argmax(err))
+            if err[worst] > self.divergence_limit:
+                raise DivergenceError(
+                    self.t,
+                    f"closure residual {err[worst]:.4g} beyond the limit {self.divergence_limit:.4g}",
+                    self.model.closures[worst].name,
+                    self._likely_cause(),
+                )
+
+    def _likely_cause(self) -> str:
+        if isinstance(self.method, PenaltyClosure) and self.stiffness_report:
+            worst = max(self.stiffness_report, key=lambda r: r["omega_h"] / max(r["bound"], 1e-12))
+            if worst["omega_h"] > 0.5 * worst["bound"]:
+                return (
+                    f"penalty stiffness against step (omega_n*h = {worst['omega_h']:.3g}, bound "
+                    f"{worst['bound']:.3g} for {self.settings.integrator}); lower the gains, add "
+                    "substeps, or use implicit_euler or --closure exact"
+                )
+        sigma = self.smallest_singular_value()
+        if np.isfinite(sigma) and sigma < 1e-3:
+            return (
+                f"a singular pose (smallest singular value of the closure Jacobian {sigma:.2g}); "
+                "use --closure exact, a smaller step, or start away from the singularity"
+            )
+        return "a step too large for the motion; add substeps or use an adaptive integrator"
+
+    def smallest_singular_value(self) -> float:
+        """Smallest singular value of the closure Jacobian at the current pose (nan if none)."""
+        if not self.model.n_rows or not all(np.isfinite(self.q)):
+            return float("nan")
+        ct = self.mechanism.closures.evaluate(forward_kinematics(self.model, self.q, self.qd))
+        return float(np.linalg.svd(ct.jacobian, compute_uv=False).min())
+
+    # ------------------------------------------------------------------ outputs
+    def sample(self, singular_values: bool = False) -> Sample:
+        """Evaluate every observable at the current state.
+
+        Parameters
+        ----------
+        singular_values : bool
+            Also compute the smallest singular value of the closure Jacobian.
+
+        Returns
+        -------
+        Sample
+        """
+        mech = self.mechanism
+        ev = mech.evaluate(self.q, self.qd, self.tau)
+        kin = ev.dyn.kin
+        model = self.model
+        pts = model.points
+        if pts:
+            links = np.array([p.ref.link for p in pts], dtype=int)
+            local = np.array([p.ref.local for p in pts], dtype=float)
+            points = point_positions(kin, links, local)
+        else:
+            points = np.zeros((0, 2))
+        energy = mech.energies(ev, self.qd)
+        dissipation = mech.method.dissipation(ev.closure) if mech.is_penalty else 0.0
+        sigma = np.nan
+        if singular_values and model.n_rows:
+            sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
+        return Sample(
+            t=self.t,
+            q=self.q.copy(),
+            qd=self.qd.copy(),
+            qdd=ev.qdd,
+            effort=self.tau.copy(),
+            theta=kin.theta[: model.n].copy(),
+            points=points,
+            closure_force=mech.closures.closure_forces(ev.closure, ev.row_force),
+            closure_error=mech.closures.errors(ev.closure),
+            closure_points=ev.closure.points,
+            energy=energy,
+            power_in=float(self.tau @ self.qd),
+            dissipation=dissipation,
+            segments=link_segments(model, kin),
+            sigma_min=sigma,
+        )
+
+    def describe(self) -> dict:
+        """Run settings as plain data (for summaries and log metadata)."""
+        s = self.settings
+        out = {
+            "scene": self.model.name,
+            "integrator": s.integrator,
+            "closure": s.closure,
+            "rate": s.rate,
+            "substeps": s.substeps,
+            "dt": self.dt,
+            "h": self.h,
+        }
+        if isinstance(self.method, PenaltyClosure):
+            out["kp"] = self.method.kp.tolist()
+            out["kv"] = self.method.kv.tolist()
+        else:
+            out["alpha"] = self.method.alpha
+            out["beta"] = self.method.beta
+            out["projection"] = self.method.projection
+        if not self.integrator.fixed_step:
+            out["rtol"] = s.rtol
+            out["atol"] = s.atol
+        return out
+
+
+def with_overrides(settings: SimulationSettings, **changes) -> SimulationSettings:
+    """A copy of ``settings`` with the non-None ``changes`` applied."""
+    return replace(settings, **{k: v for k, v in changes.items() if v is not None})
