@@ -1,0 +1,47 @@
+"""ament_python / pip packaging of vjm_ros."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "vjm_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    package_data={package_name: ["scenes/*.yaml"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.24,<3",
+        "scipy>=1.10,<2",
+        "PyYAML>=6,<7",
+        "matplotlib>=3.6,<4",
+        "mcap>=1.1,<2",
+        "mcap-ros2-support>=0.5,<1",
+        "rerun-sdk>=0.41,<0.42",
+    ],
+    extras_require={
+        "test": ["pytest>=8", "pytest-benchmark>=4", "hypothesis>=6.100", "ruff>=0.5"],
+        "compare": ["mujoco>=4.0.1"],
+    },
+    zip_safe=True,
+    maintainer="vjm_ros maintainers",
+    maintainer_email="vjm_ros@example.com",
+    description="Planar closed-chain mechanisms by the virtual joint method, as a ROS 2 node and replayable logs.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "vjm = vjm_ros.cli:main",
+            "vjm_sim_node = vjm_ros.ros.node:main",
+            "vjm_pd_controller = vjm_ros.ros.controller:main",
+        ],
+    },
+)

@@ -1,0 +1,13 @@
+"""Test-wide set-up: keep DDS discovery on this host and give each pytest process its own domain.
+
+Set before anything imports rclpy (NOTES.md): ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps
+discovery traffic on loopback; one ``ROS_DOMAIN_ID`` per process (1-101) keeps parallel runs on
+one machine from seeing each other's messages.
+"""
+
+import os
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", str(1 + (os.getpid() % 101)))
+os.environ.setdefault("ROS_LOG_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "vjm_ros_test_logs"))
+os.environ.setdefault("MPLBACKEND", "Agg")
