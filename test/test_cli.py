@@ -1,0 +1,88 @@
+"""The ``vjm`` command line contract of DESIGN section 5, through the installed entry point."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from vjm_ros.scene import builtin_scenes, load_scene
+
+SUMMARY_KEYS = {
+    "scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time", "steps",
+    "realtime_factor", "max_closure_error", "rms_closure_error", "energy_drift",
+    "energy_balance_residual", "finite",
+}
+
+
+def vjm(*args, cwd=None):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return subprocess.run(
+        [sys.executable, "-m", "vjm_ros.cli", *args],
+        capture_output=True, text=True, timeout=300, cwd=cwd, env=env,
+    )
+
+
+def expected_columns(model):
+    cols = ["t"]
+    for j in model.joint_names:
+        cols += [f"q.{j}", f"qd.{j}", f"qdd.{j}", f"effort.{j}"]
+    cols += [f"theta.{lk}" for lk in model.link_names]
+    for p in model.points:
+        cols += [f"x.{p.name}", f"y.{p.name}"]
+    for c in model.closures:
+        cols += [f"f.{c.name}.z"] if c.kind == "angle" else [f"f.{c.name}.x", f"f.{c.name}.y"]
+    return cols + ["energy.kinetic", "energy.potential", "energy.constraint", "energy.total",
+                   "closure_error"]
+
+
+def test_scenes_lists_builtins():
+    out = vjm("scenes")
+    assert out.returncode == 0, out.stderr
+    listed = {line.split()[0] for line in out.stdout.splitlines() if line.strip()}
+    assert listed == set(builtin_scenes())
+
+
+@pytest.mark.parametrize("scene", ["six_bar", "rrr_platform"])
+def test_run_writes_contract(tmp_path, scene):
+    """trajectory.csv columns, summary.json keys and the --json last line."""
+    out = vjm("run", scene, "--duration", "0.05", "--out", str(tmp_path), "--json")
+    assert out.returncode == 0, out.stderr
+    last = json.loads(out.stdout.strip().splitlines()[-1])
+    assert SUMMARY_KEYS <= set(last)
+    assert last["scene"] == scene and last["finite"] is True
+    assert last["steps"] == 50 and abs(last["sim_time"] - 0.05) < 1e-12
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    with (tmp_path / "trajectory.csv").open() as fh:
+        rows = list(csv.reader(fh))
+    model = load_scene(scene).model
+    assert rows[0] == expected_columns(model)
+    assert len(rows) == 1 + 51  # t = 0 and 50 ticks
+    assert float(rows[-1][0]) == pytest.approx(0.05, abs=1e-12)
+
+
+def test_effort_and_flags(tmp_path):
+    """--effort, --closure exact and --integrator reach the run; the effort column shows it."""
+    out = vjm("run", "pendulum", "--duration", "0.01", "--effort", "1.5", "--closure", "exact",
+              "--integrator", "semi_implicit_euler", "--out", str(tmp_path), "--json")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout.strip().splitlines()[-1])
+    assert s["closure"] == "exact" and s["integrator"] == "semi_implicit_euler"
+    with (tmp_path / "trajectory.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert float(rows[-1]["effort.pivot"]) == 1.5
+
+
+def test_bad_inputs_exit_2():
+    """Unknown scene, wrong effort count and stiff gains are refused before running."""
+    out = vjm("run", "no_such_scene")
+    assert out.returncode == 2 and "no_such_scene" in out.stderr
+    out = vjm("run", "five_bar", "--effort", "1.0", "--duration", "0.01")
+    assert out.returncode == 2 and "efforts" in out.stderr
+    out = vjm("run", "four_bar", "--kp", "1e9", "--kv", "0", "--duration", "0.01")
+    assert out.returncode == 2 and "stability bound" in out.stderr and "tip_pin" in out.stderr
+    out = vjm("run", "four_bar", "--integrator", "nope")
+    assert out.returncode == 2 and "rk4" in out.stderr
