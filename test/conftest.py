@@ -9,5 +9,7 @@ import os
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + (os.getpid() % 101)))
-os.environ.setdefault("ROS_LOG_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "vjm_ros_test_logs"))
+os.environ.setdefault(
+    "ROS_LOG_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "vjm_ros_test_logs")
+)
 os.environ.setdefault("MPLBACKEND", "Agg")

@@ -11,9 +11,20 @@ import pytest
 from vjm_ros.scene import builtin_scenes, load_scene
 
 SUMMARY_KEYS = {
-    "scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time", "steps",
-    "realtime_factor", "max_closure_error", "rms_closure_error", "energy_drift",
-    "energy_balance_residual", "finite",
+    "scene",
+    "integrator",
+    "closure",
+    "rate",
+    "substeps",
+    "sim_time",
+    "wall_time",
+    "steps",
+    "realtime_factor",
+    "max_closure_error",
+    "rms_closure_error",
+    "energy_drift",
+    "energy_balance_residual",
+    "finite",
 }
 
 
@@ -21,7 +32,11 @@ def vjm(*args, cwd=None):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     return subprocess.run(
         [sys.executable, "-m", "vjm_ros.cli", *args],
-        capture_output=True, text=True, timeout=300, cwd=cwd, env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+        env=env,
     )
 
 
@@ -34,8 +49,13 @@ def expected_columns(model):
         cols += [f"x.{p.name}", f"y.{p.name}"]
     for c in model.closures:
         cols += [f"f.{c.name}.z"] if c.kind == "angle" else [f"f.{c.name}.x", f"f.{c.name}.y"]
-    return cols + ["energy.kinetic", "energy.potential", "energy.constraint", "energy.total",
-                   "closure_error"]
+    return cols + [
+        "energy.kinetic",
+        "energy.potential",
+        "energy.constraint",
+        "energy.total",
+        "closure_error",
+    ]
 
 
 def test_scenes_lists_builtins():
@@ -66,8 +86,21 @@ def test_run_writes_contract(tmp_path, scene):
 
 def test_effort_and_flags(tmp_path):
     """--effort, --closure exact and --integrator reach the run; the effort column shows it."""
-    out = vjm("run", "pendulum", "--duration", "0.01", "--effort", "1.5", "--closure", "exact",
-              "--integrator", "semi_implicit_euler", "--out", str(tmp_path), "--json")
+    out = vjm(
+        "run",
+        "pendulum",
+        "--duration",
+        "0.01",
+        "--effort",
+        "1.5",
+        "--closure",
+        "exact",
+        "--integrator",
+        "semi_implicit_euler",
+        "--out",
+        str(tmp_path),
+        "--json",
+    )
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout.strip().splitlines()[-1])
     assert s["closure"] == "exact" and s["integrator"] == "semi_implicit_euler"

@@ -13,8 +13,16 @@ SCENES = builtin_scenes()
 
 def test_all_listed():
     """The scenes DESIGN section 4 and issue 2 ask for are shipped."""
-    for name in ("four_bar", "six_bar", "double_slider", "five_bar", "three_chain",
-                 "rrr_platform", "pendulum", "slider_crank"):
+    for name in (
+        "four_bar",
+        "six_bar",
+        "double_slider",
+        "five_bar",
+        "three_chain",
+        "rrr_platform",
+        "pendulum",
+        "slider_crank",
+    ):
         assert name in SCENES
 
 

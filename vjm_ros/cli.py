@@ -78,10 +78,16 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("scenes", help="list the built-in scenes")
 
     r = sub.add_parser("run", help="simulate a scene and write its trajectory and measures")
-    r.add_argument("scene", nargs="?", default=DEFAULT_SCENE,
-                   help=f"built-in scene name or YAML path (default: {DEFAULT_SCENE})")
+    r.add_argument(
+        "scene",
+        nargs="?",
+        default=DEFAULT_SCENE,
+        help=f"built-in scene name or YAML path (default: {DEFAULT_SCENE})",
+    )
     r.add_argument("--duration", type=float, help="simulated seconds (scene default, else 10)")
-    r.add_argument("--rate", type=float, help="control ticks per second, Hz (scene default, else 1000)")
+    r.add_argument(
+        "--rate", type=float, help="control ticks per second, Hz (scene default, else 1000)"
+    )
     r.add_argument("--substeps", type=int, help="fixed steps per tick (scene default, else 1)")
     r.add_argument("--integrator", choices=list(INTEGRATORS), help="time-stepping method")
     r.add_argument("--closure", choices=["penalty", "exact"], help="closure method")
@@ -94,14 +100,24 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--projection", action="store_true", help="exact: project q, qd each tick")
     r.add_argument("--rtol", type=float, default=1e-9, help="adaptive integrators' rtol")
     r.add_argument("--atol", type=float, default=1e-12, help="adaptive integrators' atol")
-    r.add_argument("--effort", type=float, nargs="+", metavar="E",
-                   help="constant actuator efforts in the scene's actuator order, N m or N")
-    r.add_argument("--no-stiffness-check", action="store_true",
-                   help="run even if the penalty gains exceed the integrator's stability bound")
+    r.add_argument(
+        "--effort",
+        type=float,
+        nargs="+",
+        metavar="E",
+        help="constant actuator efforts in the scene's actuator order, N m or N",
+    )
+    r.add_argument(
+        "--no-stiffness-check",
+        action="store_true",
+        help="run even if the penalty gains exceed the integrator's stability bound",
+    )
     r.add_argument("--out", type=Path, help="directory for trajectory.csv and summary.json")
     r.add_argument("--mcap", type=Path, help="write a ROS 2 MCAP log")
     r.add_argument("--rrd", help="write a rerun recording (.rrd path, 'spawn' or 'connect')")
-    r.add_argument("--plots", action="store_true", help="write the thesis figure set (PNG) to --out")
+    r.add_argument(
+        "--plots", action="store_true", help="write the thesis figure set (PNG) to --out"
+    )
     r.add_argument("--json", action="store_true", help="print the summary as JSON on the last line")
 
     b = sub.add_parser("bench", help="speed/accuracy study", add_help=False)
@@ -198,7 +214,9 @@ def _cmd_run(args) -> int:
     settings = _settings(args, scene)
     duration = args.duration if args.duration is not None else scene.defaults.get("duration", 10.0)
     if not (np.isfinite(duration) and duration > 0):
-        raise ConfigurationError(f"--duration: expected a positive number of seconds, found {duration}")
+        raise ConfigurationError(
+            f"--duration: expected a positive number of seconds, found {duration}"
+        )
     if args.plots and args.out is None:
         raise ConfigurationError("--plots needs --out DIR")
     sim = Simulator(scene.model, settings, scene.gains)
@@ -260,7 +278,9 @@ def _prepare_dir(path: Path) -> None:
         probe.write_text("")
         probe.unlink()
     except OSError as exc:
-        raise ConfigurationError(f"--out {path}: expected a writable directory ({exc.strerror or exc})") from None
+        raise ConfigurationError(
+            f"--out {path}: expected a writable directory ({exc.strerror or exc})"
+        ) from None
 
 
 def _open_recorders(args, scene, sim) -> list:
@@ -304,9 +324,20 @@ def _run_info(sim, wall: float) -> dict:
 
 def _print_summary(summary: dict) -> None:
     keys = [
-        "scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time", "steps",
-        "realtime_factor", "max_closure_error", "rms_closure_error", "energy_drift",
-        "energy_balance_residual", "finite",
+        "scene",
+        "integrator",
+        "closure",
+        "rate",
+        "substeps",
+        "sim_time",
+        "wall_time",
+        "steps",
+        "realtime_factor",
+        "max_closure_error",
+        "rms_closure_error",
+        "energy_drift",
+        "energy_balance_residual",
+        "finite",
     ]
     for k in keys:
         v = summary.get(k)

@@ -309,10 +309,7 @@ class ExactClosure:
         minv_q, minv_at = x[:, 0], x[:, 1:]
         g = a @ minv_at
         rhs = -(
-            a @ minv_q
-            + terms.bias
-            + 2.0 * self.alpha * terms.rate
-            + self.beta**2 * terms.residual
+            a @ minv_q + terms.bias + 2.0 * self.alpha * terms.rate + self.beta**2 * terms.residual
         )
         lam = solve_multipliers(g, rhs, self.rcond)
         return minv_q + minv_at @ lam, lam

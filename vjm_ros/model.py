@@ -383,7 +383,7 @@ class Model:
         Locked coordinates keep their values; only the active ones change.
         """
         joints = []
-        for j, qi, vi in zip(self.joints, q, qd):
+        for j, qi, vi in zip(self.joints, q, qd, strict=True):
             if j.kind == REVOLUTE:
                 joints.append(Joint(j.name, j.kind, float(qi), j.slide, float(vi)))
             else:

@@ -169,9 +169,13 @@ class Simulator:
         self.scene_gains = dict(scene_gains or {})
         self.dt = 1.0 / self.settings.rate
         self.h = self.dt / self.settings.substeps
-        self.integrator = make_integrator(
-            self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
-        ) if self._adaptive() else make_integrator(self.settings.integrator)
+        self.integrator = (
+            make_integrator(
+                self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
+            )
+            if self._adaptive()
+            else make_integrator(self.settings.integrator)
+        )
         self.q0, self.qd0 = model.initial_state()
         self.selection = model.actuator_matrix()
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
@@ -244,15 +248,26 @@ class Simulator:
             else:
                 bound = np.inf
             rows.append(
-                {"closure": name, "row": i, "m_eff": float(m), "omega_n": wn, "zeta": zeta,
-                 "omega_h": wn * self.h, "bound": bound}
+                {
+                    "closure": name,
+                    "row": i,
+                    "m_eff": float(m),
+                    "omega_n": wn,
+                    "zeta": zeta,
+                    "omega_h": wn * self.h,
+                    "bound": bound,
+                }
             )
         return rows
 
     def _check_stiffness(self) -> None:
         for row in self.stiffness_report:
             if row["omega_h"] > row["bound"]:
-                need = int(np.ceil(row["omega_n"] * self.dt / row["bound"])) if row["bound"] > 0 else None
+                need = (
+                    int(np.ceil(row["omega_n"] * self.dt / row["bound"]))
+                    if row["bound"] > 0
+                    else None
+                )
                 hint = (
                     f"use --substeps {need} or more, " if need else ""
                 ) + "the implicit_euler integrator, or --closure exact"
@@ -318,7 +333,13 @@ class Simulator:
         with np.errstate(all="ignore"):
             try:
                 q, qd = self.integrator.advance(
-                    self.mechanism, self.t, self.q, self.qd, self.tau, self.dt, self.settings.substeps
+                    self.mechanism,
+                    self.t,
+                    self.q,
+                    self.qd,
+                    self.tau,
+                    self.dt,
+                    self.settings.substeps,
                 )
             except (FloatingPointError, np.linalg.LinAlgError) as exc:
                 raise DivergenceError(self.t, str(exc), None, self._likely_cause()) from exc
@@ -332,7 +353,9 @@ class Simulator:
 
     def _guard(self) -> None:
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd))):
-            raise DivergenceError(self.t, "the state is no longer finite", None, self._likely_cause())
+            raise DivergenceError(
+                self.t, "the state is no longer finite", None, self._likely_cause()
+            )
         if self.model.n_rows and self.divergence_limit:
             terms = self.mechanism.closures.evaluate(
                 forward_kinematics(self.model, self.q), jacobian=False

@@ -49,9 +49,7 @@ def make_integrator(name: str, **options) -> Integrator:
     try:
         cls = INTEGRATORS[name]
     except KeyError:
-        raise ValueError(
-            f"unknown integrator {name!r}; known: {', '.join(INTEGRATORS)}"
-        ) from None
+        raise ValueError(f"unknown integrator {name!r}; known: {', '.join(INTEGRATORS)}") from None
     if issubclass(cls, AdaptiveIntegrator):
         return cls(**options)
     return cls()

@@ -10,8 +10,8 @@ boundary: a fresh effort is never mixed into a step already begun.
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import DOP853, LSODA, RK23, RK45, Radau
 from scipy.integrate import BDF as _BDF
+from scipy.integrate import DOP853, LSODA, RK23, RK45, Radau
 
 from .base import Integrator
 

@@ -53,7 +53,7 @@ class Integrator(ABC):
         """Largest stable ``omega_n h`` for a linear oscillator with damping ratio ``zeta``."""
         return np.inf
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027 (optional hook: most methods keep no state)
         """Forget any state kept between ticks (after a jump of the state)."""
 
 
