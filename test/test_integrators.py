@@ -1,0 +1,196 @@
+"""Fixed-step integrators: energy conservation, observed orders, stability bounds, registry.
+
+Oracles: conservation of T + V on open chains (no closures, no efforts); the observed order
+log2(e(h) / e(h/2)) against a much finer RK4 reference; the closed-form stability limits of each
+method on the oscillator x'' + 2 zeta x' + x = 0.
+"""
+
+from __future__ import annotations
+
+import chains as ch
+import numpy as np
+import pytest
+
+from vjm_ros.constraints import PenaltyClosure
+from vjm_ros.integrators import FIXED_STEP, INTEGRATORS, make_integrator
+from vjm_ros.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
+from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.system import Mechanism
+
+# --------------------------------------------------------------------------- energy
+
+
+@pytest.mark.parametrize(
+    "seed, n_links, n_chains, gravity, p_revolute, substeps",
+    [
+        # a chaotic 4-link pendulum in gravity (bounded motion, swings up to ~13 rad/s), h = 1 ms
+        (3, 4, 1, (0.0, -9.81), 1.0, 50),
+        # revolute and prismatic joints on two chains without gravity (sliding and turning,
+        # rates ~2 rad/s), h = 2 ms
+        (4, 5, 2, (0.0, 0.0), 0.5, 25),
+    ],
+)
+def test_open_chain_conserves_energy(seed, n_links, n_chains, gravity, p_revolute, substeps):
+    """Oracle: T + V is constant on open chains without efforts (rk4, small step, 5 s)."""
+    rng = np.random.default_rng(seed)
+    model = ch.random_model(rng, n_links, n_chains, gravity=gravity, p_revolute=p_revolute)
+    sim = Simulator(model, SimulationSettings(integrator="rk4", rate=20.0, substeps=substeps))
+    e0 = sim.sample().energy
+    drift, t_max = 0.0, e0[0]
+    for _ in range(100):
+        sim.advance()
+        e = sim.sample().energy
+        drift = max(drift, abs(e[3] - e0[3]))
+        t_max = max(t_max, e[0])
+    assert t_max > 1.0  # the chain does move
+    # RK4's energy error grows like C (omega h)^4 per unit time: omega h <= ~1.3e-2 here gives
+    # ~1e-8 of the kinetic energy scale over 5 s at most (measured 5e-10 for the pendulum chain,
+    # 1e-11 for the other). Bound: 1e-7 of max T.
+    assert drift < 1e-7 * t_max
+
+
+# --------------------------------------------------------------------------- orders
+
+
+def order_model():
+    """A fixed 3-link chain: revolute, prismatic, revolute, in gravity, with initial rates."""
+    return ch.random_model(np.random.default_rng(3), 3, 1)
+
+
+def final_state(model, name, steps, duration=1.0):
+    """State after ``duration`` with ``steps`` equal steps of the method (one control tick)."""
+    q, qd = model.initial_state()
+    mech = Mechanism(model, PenaltyClosure(np.zeros(0), np.zeros(0)))
+    integ = make_integrator(name)
+    q1, qd1 = integ.advance(mech, 0.0, q, qd, np.zeros(model.n), duration, steps)
+    return np.concatenate((q1, qd1))
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """RK4 with 1280 steps: its error (~e_rk4(1/160) / 8^4) is below 1e-3 of every compared one."""
+    model = order_model()
+    assert not model.is_revolute.all() and model.is_revolute.any()
+    return model, final_state(model, "rk4", 1280)
+
+
+@pytest.mark.parametrize(
+    "name, steps, lo, hi",
+    [
+        # h = 1/40 .. 1/160 s: asymptotic for the chain's ~5 rad/s motion, errors 1e-5 .. 1e-8
+        # (far above round-off), so log2 ratios sit within 0.1 of 4.
+        ("rk4", (40, 80, 160), 3.5, 4.5),
+        # first-order methods, h = 4 ms .. 1 ms: errors ~1e-2 .. 1e-3, ratios within 0.02 of 1.
+        ("semi_implicit_euler", (250, 500, 1000), 0.8, 1.2),
+        ("explicit_euler", (250, 500, 1000), 0.8, 1.2),
+    ],
+)
+def test_observed_order(reference, name, steps, lo, hi):
+    """Oracle: log2(e(h) / e(h/2)) ~ the method's order, errors against a fine RK4 reference."""
+    model, ref = reference
+    errs = [float(np.max(np.abs(final_state(model, name, n) - ref))) for n in steps]
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert np.all((orders >= lo) & (orders <= hi)), (errs, orders)
+    assert make_integrator(name).order == round(float(np.mean(orders)))
+
+
+# --------------------------------------------------------------------------- stability bounds
+
+
+@pytest.mark.parametrize("zeta", [0.05, 0.3, 0.7, 0.95])
+def test_explicit_euler_bound(zeta):
+    """Oracle: |1 + h (-zeta +- i sqrt(1 - zeta^2))| = 1 at h = 2 zeta (zeta < 1)."""
+    # The bisection ends where the spectral radius exceeds 1 + 1e-12; near the bound it rises
+    # with slope ~ zeta, so the bound is found to ~1e-11.
+    assert make_integrator("explicit_euler").stability_bound(zeta) == pytest.approx(
+        2 * zeta, abs=1e-9
+    )
+
+
+def test_explicit_euler_undamped_is_never_stable():
+    """Oracle: at zeta = 0 the radius is sqrt(1 + h^2) > 1 for every h > 0 (bound 0)."""
+    # The radius 1 + h^2/2 passes the method's 1e-12 tolerance up to h = sqrt(2e-12) = 1.4e-6.
+    assert make_integrator("explicit_euler").stability_bound(0.0) < 2e-6
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.1, 0.5])
+def test_semi_implicit_euler_bound(zeta):
+    """Oracle: 2 (sqrt(1 + zeta^2) - zeta) (Jury test on trace 2 - h^2 - 2 zeta h, det 1 - 2 zeta h).
+
+    At zeta = 0 this is the textbook omega h < 2.
+    """
+    # At zeta = 0 the step matrix is defective at h = 2 and its computed eigenvalues carry
+    # ~sqrt(eps) error nearby, so allow 1e-7 relative; elsewhere the bound is found to ~1e-12.
+    expect = 2 * (np.sqrt(1 + zeta**2) - zeta)
+    assert make_integrator("semi_implicit_euler").stability_bound(zeta) == pytest.approx(
+        expect, rel=1e-7
+    )
+
+
+def test_rk4_bound():
+    """Oracle: |R(iy)|^2 = 1 - y^6/72 + y^8/576 = 1 at y = 2 sqrt(2) (undamped)."""
+    # The radius crosses 1 with slope ~1 (simple eigenvalues): bisection accuracy ~1e-12.
+    assert make_integrator("rk4").stability_bound(0.0) == pytest.approx(2 * np.sqrt(2), rel=1e-9)
+
+
+def test_implicit_penalty_euler_is_unconditionally_stable():
+    """Oracle: the implicit treatment of the penalty forces has no step limit (bound inf)."""
+    assert make_integrator("implicit_euler").stability_bound(0.1) == np.inf
+
+
+def test_registry_has_fixed_step_methods():
+    """The live-node methods of DESIGN section 3 are registered as fixed-step."""
+    for name in ("explicit_euler", "semi_implicit_euler", "rk4", "implicit_euler"):
+        assert name in FIXED_STEP
+
+
+def test_unknown_integrator_name():
+    """Oracle: a ValueError whose message names every registered integrator."""
+    with pytest.raises(ValueError) as info:
+        make_integrator("leapfrog_9000")
+    message = str(info.value)
+    assert "leapfrog_9000" in message
+    for name in INTEGRATORS:
+        assert name in message
+    with pytest.raises(ValueError) as info:
+        Simulator(order_model(), SimulationSettings(integrator="leapfrog_9000"))
+    for name in INTEGRATORS:
+        assert name in str(info.value)
+
+
+# --------------------------------------------------------------------------- efforts per tick
+
+
+def block_model():
+    """A 2 kg block on a slide rising 30 degrees (n(theta1) with theta1 = 60 deg), actuated."""
+    return Model.build(
+        "block",
+        (Chain("c", (0.0, 0.0), np.radians(60.0), 0.2, (0,)),),
+        (Link("block", 0, 0.3, 2.0, 0.05, (0.1, 0.0)),),
+        (Joint("slide", PRISMATIC, 0.0, 0.1, 0.3),),
+        actuators=(Actuator(0),),
+    )
+
+
+@pytest.mark.parametrize("name", ["rk4", "dop853", "rk45", "rk23", "radau"])
+def test_efforts_switch_only_at_tick_boundaries(name):
+    """Oracle: piecewise-constant acceleration (F_k / m - g sin 30 deg), integrated in closed form.
+
+    The effort changes every third tick. Every Runge-Kutta method of order >= 2 (and its dense
+    output) is exact on a constant acceleration, so any error beyond round-off means an effort
+    acted inside a step begun under another one (that would be off by ~F/m dt^2 ~ 1e-4 m).
+    """
+    model = block_model()
+    mass, g = 2.0, 9.81
+    sim = Simulator(model, SimulationSettings(integrator=name, rate=100.0, substeps=4))
+    x, v = 0.1, 0.3
+    dt = 0.01
+    worst = 0.0
+    for k in range(60):
+        force = 6.0 if (k // 3) % 2 == 0 else -4.0
+        sim.advance([force])
+        a = force / mass - g * 0.5
+        x, v = x + v * dt + 0.5 * a * dt * dt, v + a * dt
+        worst = max(worst, abs(sim.q[0] - x), abs(sim.qd[0] - v))
+    # Round-off of 60 ticks on values ~1: measured <= 3e-15.
+    assert worst < 1e-12
