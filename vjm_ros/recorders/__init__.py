@@ -1,0 +1,158 @@
+"""Logs of a simulation: MCAP (ROS 2 profile) and rerun recordings, usable without ROS.
+
+Both recorders share one API: ``write(sample)`` after every tick, ``note_reset(t)`` when the
+simulator is reset, ``close()`` (idempotent) or use as a context manager::
+
+    from vjm_ros.recorders import McapRecorder, finalize_on_signals
+
+    with finalize_on_signals(), McapRecorder("run.mcap", sim.model, sim.describe(), scene.text) as rec:
+        for _ in range(n):
+            sim.advance()
+            rec.write(sim.sample())
+
+Recording time. Log times are simulated time. The simulator's clock restarts at 0 on a reset; the
+recorders keep their time axis monotonic by shifting every later episode so that it starts one
+tick after the last time written (:class:`Timebase`).
+
+The heavy dependencies (``mcap``, ``rerun``) are imported only when a recorder class is used.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .mcap_recorder import McapRecorder
+    from .rerun_recorder import RerunRecorder
+
+__all__ = ["McapRecorder", "RerunRecorder", "Timebase", "finalize_on_signals", "package_versions"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "McapRecorder":
+        from .mcap_recorder import McapRecorder
+
+        return McapRecorder
+    if name == "RerunRecorder":
+        from .rerun_recorder import RerunRecorder
+
+        return RerunRecorder
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+DEFAULT_SIGNALS: tuple[int, ...] = tuple(
+    s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s is not None
+)
+
+
+@contextmanager
+def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[None]:
+    """Turn termination signals into :class:`SystemExit` while the block runs.
+
+    A process stopped with SIGTERM (``kill``, ``timeout``, a launch system) then unwinds normally,
+    so the ``close()`` of every recorder opened in or around the block runs and the logs are
+    finalized. The exit status is ``128 + signal number``, as for a default kill. Further signals
+    of the set are ignored while unwinding, so a second SIGTERM cannot cut finalization short
+    (SIGKILL still can). The previous handlers come back when the block ends. SIGINT is left
+    alone: Python already raises :class:`KeyboardInterrupt` for it.
+
+    Outside the main thread, where Python cannot install signal handlers, this does nothing.
+
+    Parameters
+    ----------
+    signals : tuple of int
+        Signals to convert; SIGTERM and SIGHUP by default.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def _ignore(signum: int, frame: object) -> None:
+        return None
+
+    def _exit(signum: int, frame: object) -> None:
+        for s in signals:
+            signal.signal(s, _ignore)
+        raise SystemExit(128 + signum)
+
+    previous = {s: signal.signal(s, _exit) for s in signals}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+class Timebase:
+    """Monotonic recording time (ns) from the simulator's time, which restarts at each reset.
+
+    Parameters
+    ----------
+    tick : float
+        Control period, s. After a reset the next episode starts ``tick`` after the last time
+        written, so no two episodes share a time stamp.
+    """
+
+    def __init__(self, tick: float = 0.0):
+        self.tick_ns = max(int(round(tick * 1e9)), 0)
+        self.offset_ns = 0
+        self.last_ns: int | None = None
+
+    def to_ns(self, t: float) -> int:
+        """Recording time of simulator time ``t`` (s) in the current episode, ns."""
+        ns = self.offset_ns + int(round(t * 1e9))
+        if self.last_ns is None or ns > self.last_ns:
+            self.last_ns = ns
+        return ns
+
+    def reset(self, t: float | None = None) -> int:
+        """Start a new episode.
+
+        Parameters
+        ----------
+        t : float, optional
+            Simulator time at which the ending episode stopped, s; the last time written when
+            omitted or earlier.
+
+        Returns
+        -------
+        int
+            Recording time at which the new episode starts (its ``t = 0``), ns.
+        """
+        if self.last_ns is None and t is None:
+            return self.offset_ns
+        end = self.last_ns if self.last_ns is not None else 0
+        if t is not None:
+            end = max(end, self.offset_ns + int(round(t * 1e9)))
+        self.offset_ns = end + self.tick_ns
+        self.last_ns = end
+        return self.offset_ns
+
+
+def tick_of(settings: dict) -> float:
+    """Control period (s) from run settings: ``dt``, else ``1 / rate``, else 0."""
+    if settings.get("dt"):
+        return float(settings["dt"])
+    if settings.get("rate"):
+        return 1.0 / float(settings["rate"])
+    return 0.0
+
+
+def package_versions(
+    names: tuple[str, ...] = ("vjm_ros", "numpy", "scipy", "mcap", "rerun-sdk"),
+) -> dict:
+    """Installed versions of the packages that shape a log (``"not installed"`` when absent)."""
+    import platform
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
