@@ -26,6 +26,9 @@ setup(
         "mcap>=1.1,<2",
         "mcap-ros2-support>=0.5,<1",
         "rerun-sdk>=0.41,<0.42",
+        # Compiled physics kernel (vjm_ros/_kernels.py): ~30x per evaluation. 0.64 is the first
+        # release whose requirements admit numpy 2.4; without numba the numpy reference is used.
+        "numba>=0.64,<1",
     ],
     extras_require={
         "test": ["pytest>=8", "pytest-benchmark>=4", "hypothesis>=6.100", "ruff>=0.5"],

@@ -108,6 +108,12 @@ def _parser() -> argparse.ArgumentParser:
         help="constant actuator efforts in the scene's actuator order, N m or N",
     )
     r.add_argument(
+        "--kernel",
+        choices=["auto", "numba", "numpy"],
+        default="auto",
+        help="physics kernel: compiled (numba) or the numpy reference (default: auto)",
+    )
+    r.add_argument(
         "--no-stiffness-check",
         action="store_true",
         help="run even if the penalty gains exceed the integrator's stability bound",
@@ -201,6 +207,7 @@ def _settings(args, scene):
         projection=bool(args.projection or g.get("projection", False)),
         rtol=args.rtol,
         atol=args.atol,
+        kernel=args.kernel,
         check_stiffness=not args.no_stiffness_check,
     )
 

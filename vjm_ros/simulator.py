@@ -6,6 +6,7 @@ A control tick of length ``dt = 1 / rate`` holds the efforts constant and advanc
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -48,6 +49,9 @@ class SimulationSettings:
         Exact closure only: project ``q``, ``qd`` onto the closure manifold after each tick.
     rtol, atol : float
         Tolerances of adaptive integrators.
+    kernel : str
+        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
+        error without numba) or ``"numpy"`` (the reference implementation).
     check_stiffness : bool
         Refuse penalty gains beyond the integrator's stability bound before running.
     divergence_limit : float or None
@@ -67,6 +71,7 @@ class SimulationSettings:
     projection: bool = False
     rtol: float = 1e-9
     atol: float = 1e-12
+    kernel: str = "auto"
     check_stiffness: bool = True
     divergence_limit: float | None = None
 
@@ -90,6 +95,12 @@ class SimulationSettings:
             v = getattr(self, key)
             if v is not None and not (np.isfinite(v) and v >= 0):
                 raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        if self.kernel not in ("auto", "numba", "numpy"):
+            raise ConfigurationError(
+                f"kernel: expected 'auto', 'numba' or 'numpy', found {self.kernel!r}"
+            )
+        if self.kernel == "numba" and importlib.util.find_spec("numba") is None:
+            raise ConfigurationError("kernel: 'numba' needs the numba package")
         make_integrator(self.integrator)  # raises with the list of known names
         return self
 
@@ -180,7 +191,13 @@ class Simulator:
         self.selection = model.actuator_matrix()
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self.method = self._closure_method()
-        self.mechanism = Mechanism(model, self.method)
+        if self.settings.kernel == "numpy":
+            self.mechanism = Mechanism(model, self.method)
+        else:
+            from .fast import fuse_integrator, make_mechanism  # numba is imported only here
+
+            self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
+            self.integrator = fuse_integrator(self.integrator, self.mechanism)
         self.stiffness_report = self._stiffness_report()
         if self.settings.check_stiffness:
             self._check_stiffness()
@@ -357,10 +374,13 @@ class Simulator:
                 self.t, "the state is no longer finite", None, self._likely_cause()
             )
         if self.model.n_rows and self.divergence_limit:
-            terms = self.mechanism.closures.evaluate(
-                forward_kinematics(self.model, self.q), jacobian=False
-            )
-            err = self.mechanism.closures.errors(terms)
+            if hasattr(self.mechanism, "closure_errors"):
+                err = self.mechanism.closure_errors(self.q)
+            else:
+                terms = self.mechanism.closures.evaluate(
+                    forward_kinematics(self.model, self.q), jacobian=False
+                )
+                err = self.mechanism.closures.errors(terms)
             worst = int(np.argmax(err))
             if err[worst] > self.divergence_limit:
                 raise DivergenceError(
@@ -452,6 +472,7 @@ class Simulator:
             "substeps": s.substeps,
             "dt": self.dt,
             "h": self.h,
+            "kernel": getattr(self.mechanism, "kernel", "numpy"),
         }
         if isinstance(self.method, PenaltyClosure):
             out["kp"] = self.method.kp.tolist()

@@ -1,0 +1,448 @@
+"""The compiled kernel (:mod:`vjm_ros.fast`) reproduces the numpy reference (:mod:`vjm_ros.system`).
+
+Tolerances. Both implementations evaluate the same formulas in double precision but sum in another
+order, factor ``M`` by LU with partial pivoting (LAPACK ``dgesv`` / a scalar loop) and diagonalize
+``G = A M^-1 A^T`` by ``dsyevd`` / Jacobi rotations. Each is backward stable, so the two results
+differ by about ``eps * kappa``, ``eps = 2.2e-16`` and ``kappa`` the condition number of the solve:
+``cond(M)`` (penalty), ``cond(M) * cond+(G)`` (exact; ``cond+`` over the eigenvalues the truncated
+solve keeps), ``cond(M + h A^T (h Kp + Kv) A)`` (penalty-implicit velocity). Measured over
+thousands of random states of every model here, the norm-wise difference (relative to the largest
+component of the reference) stays below ``0.6 eps kappa``. The check is therefore
+``<= max(RTOL, 4 eps kappa)`` with ``RTOL = 1e-12``: on the built-in scenes (``kappa`` ~1e1-1e4)
+that is 1e-12, ~50x above the differences seen (~2e-14), while any modelling difference (a wrong
+sign, a missing term) shows at 1e-6 or more. Random poses of the over-constrained test models are
+sometimes nearly singular; draws with ``kappa > KAPPA_MAX = 1e6`` are skipped, since there the
+comparison would measure conditioning, not physics.
+
+Over 1 s of RK4 at 1 kHz these round-off differences are carried through 1000 steps and amplified by
+the dynamics (the five-bar and three-chain scenes grow perturbations ~10-100x per second, DESIGN
+section 6): measured differences are ~1e-13, and ``RUN_TOL = 1e-9`` (rad, m, rad/s, m/s) leaves
+orders of magnitude of margin.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import zlib
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from vjm_ros.constraints import ExactClosure, PenaltyClosure
+from vjm_ros.fast import (
+    HAVE_NUMBA,
+    FastEvaluation,
+    FastMechanism,
+    FusedExplicitEuler,
+    FusedImplicitPenaltyEuler,
+    FusedRK4,
+    FusedSemiImplicitEuler,
+    fuse_integrator,
+    make_mechanism,
+)
+from vjm_ros.integrators import make_integrator
+from vjm_ros.integrators.fixed import RK4, ExplicitEuler, ImplicitPenaltyEuler, SemiImplicitEuler
+from vjm_ros.kinematics import forward_kinematics
+from vjm_ros.model import (
+    ANGLE,
+    GROUND,
+    HINGE,
+    PRISMATIC,
+    REVOLUTE,
+    SLIDER,
+    Actuator,
+    Chain,
+    Closure,
+    Joint,
+    Link,
+    Model,
+    PointRef,
+)
+from vjm_ros.scene import builtin_scenes, load_scene
+from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.system import Mechanism
+
+pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+
+RTOL = 1e-12
+RUN_TOL = 1e-9
+KAPPA_MAX = 1e6
+EPS = float(np.finfo(float).eps)
+SCENES = builtin_scenes()
+METHODS = ("penalty", "exact")
+
+
+def _method(kind: str, rows: int, rng: np.random.Generator | None = None):
+    """Penalty gains of the thesis (optionally varied per row) or the exact closure."""
+    if kind == "exact":
+        return ExactClosure(alpha=20.0, beta=15.0)
+    kp = np.full(rows, 1e5)
+    kv = np.full(rows, 100.0)
+    if rng is not None:
+        kp = kp * rng.uniform(0.5, 2.0, rows)
+        kv = kv * rng.uniform(0.5, 2.0, rows)
+    return PenaltyClosure(kp, kv)
+
+
+def _close(fast, ref, rtol=RTOL):
+    """Norm-wise relative agreement: ``max |fast - ref| <= rtol * max |ref|``."""
+    fast, ref = np.asarray(fast, dtype=float), np.asarray(ref, dtype=float)
+    assert fast.shape == ref.shape
+    scale = max(float(np.max(np.abs(ref), initial=0.0)), 1e-300)
+    err = float(np.max(np.abs(fast - ref), initial=0.0))
+    assert err <= rtol * scale, f"max error {err:.3g} vs scale {scale:.3g}"
+
+
+def _random_state(rng, model, speed=2.0):
+    q = np.where(model.is_revolute, rng.uniform(-np.pi, np.pi, model.n), rng.uniform(-0.5, 0.5, model.n))
+    return q, rng.uniform(-speed, speed, model.n), rng.normal(0.0, 5.0, model.n)
+
+
+def _kappa(model, method, q, h: float = 0.0) -> float:
+    """Condition number of the solve behind ``accelerations`` (``h = 0``) or the implicit step."""
+    ev = Mechanism(model, method).evaluate(q, np.zeros(model.n), np.zeros(model.n))
+    m, a = ev.dyn.mass_matrix, ev.closure.jacobian
+    kappa = float(np.linalg.cond(m))
+    if isinstance(method, ExactClosure):
+        if a.shape[0]:
+            w = np.linalg.eigvalsh(a @ np.linalg.solve(m, a.T))
+            kept = w[w > method.rcond * w[-1]]
+            kappa *= float(kept[-1] / kept[0])
+    elif h > 0.0:
+        kappa = max(kappa, float(np.linalg.cond(m + h * (a.T * (h * method.kp + method.kv)) @ a)))
+    return kappa
+
+
+def _tol(kappa: float) -> float:
+    """Norm-wise relative tolerance for a solve of condition number ``kappa`` (module docstring)."""
+    return max(RTOL, 4.0 * EPS * kappa)
+
+
+def _states(rng, model, method, count):
+    """``count`` random ``(q, qd, tau)`` whose solves have ``kappa <= KAPPA_MAX``."""
+    out = []
+    for _ in range(100 * count):
+        state = _random_state(rng, model)
+        if _kappa(model, method, state[0], 1e-2) <= KAPPA_MAX:
+            out.append(state)
+            if len(out) == count:
+                return out
+    raise AssertionError(f"{model.name}: fewer than {count} well-conditioned states")
+
+
+def _mixed_model(rng: np.random.Generator) -> Model:
+    """Three chains with revolute and prismatic joints and one closure of every kind and target.
+
+    The built-in scenes use hinges and ground sliders only; this model adds sliders on a moving
+    line, angle closures to ground and to another link, and prismatic joints (9 coordinates,
+    8 closure rows).
+    """
+    links, joints = [], []
+    kinds = [REVOLUTE, PRISMATIC, REVOLUTE, REVOLUTE, REVOLUTE, PRISMATIC, REVOLUTE, REVOLUTE,
+             PRISMATIC]
+    for k, kind in enumerate(kinds):
+        length = float(rng.uniform(0.3, 1.2))
+        links.append(
+            Link(
+                name=f"l{k}",
+                chain=k // 3,
+                length=length,
+                mass=float(rng.uniform(0.3, 3.0)),
+                inertia=float(rng.uniform(0.01, 0.3)),
+                com=(float(rng.uniform(-0.2, 1.2) * length), float(rng.uniform(-0.3, 0.3))),
+            )
+        )
+        joints.append(
+            Joint(
+                name=f"j{k}",
+                kind=kind,
+                angle=float(rng.uniform(-np.pi, np.pi)),
+                slide=float(rng.uniform(-0.5, 0.5)),
+                velocity=float(rng.uniform(-1.0, 1.0)),
+            )
+        )
+    chains = (
+        Chain("a", (0.0, 0.0), 0.3, 0.2, (0, 1, 2)),
+        Chain("b", (1.5, 0.2), -0.4, 0.0, (3, 4, 5)),
+        Chain("c", (0.5, -1.0), 1.2, 0.3, (6, 7, 8)),
+    )
+    d = rng.normal(size=2)
+    d = tuple(float(x) for x in d / np.linalg.norm(d))
+    closures = (
+        Closure("hinge_links", HINGE, PointRef(2, (0.7, 0.1)), PointRef(5, (0.4, -0.1))),
+        Closure("hinge_ground", HINGE, PointRef(8, (0.3, 0.0)), PointRef(GROUND, (0.5, 0.4))),
+        Closure("slider_ground", SLIDER, PointRef(4, (0.6, 0.0)), PointRef(GROUND, (1.0, -0.5)), d),
+        Closure("slider_link", SLIDER, PointRef(2, (0.2, 0.05)), PointRef(7, (0.1, 0.0)), (0.6, 0.8)),
+        Closure("angle_ground", ANGLE, PointRef(1, (0.0, 0.0)), PointRef(GROUND, (0.0, 0.0)), offset=0.4),
+        Closure("angle_link", ANGLE, PointRef(4, (0.0, 0.0)), PointRef(6, (0.0, 0.0)), offset=-2.9),
+    )
+    return Model.build(
+        "mixed",
+        chains,
+        tuple(links),
+        tuple(joints),
+        closures,
+        actuators=(Actuator(0), Actuator(3)),
+        gravity=(0.3, -9.81),
+    )
+
+
+def _models():
+    out = [(name, load_scene(name).model) for name in SCENES]
+    out += [(f"mixed{seed}", _mixed_model(np.random.default_rng(seed))) for seed in (1, 2)]
+    return out
+
+
+MODELS = _models()
+MODEL_IDS = [name for name, _ in MODELS]
+
+
+# ---------------------------------------------------------------------------------- single calls
+@pytest.mark.parametrize("kind", METHODS)
+@pytest.mark.parametrize("name,model", MODELS, ids=MODEL_IDS)
+def test_accelerations_and_implicit_velocity(name, model, kind):
+    """Same ``qdd`` and penalty-implicit velocity at the initial and at random states."""
+    rng = np.random.default_rng(zlib.crc32(f"{name}/{kind}".encode()))
+    method = _method(kind, model.n_rows, rng)
+    ref, fast = Mechanism(model, method), FastMechanism(model, method)
+    q0, qd0 = model.initial_state()
+    states = [(q0, qd0, np.zeros(model.n))] + _states(rng, model, method, 25)
+    for q, qd, tau in states:
+        _close(fast.accelerations(q, qd, tau), ref.accelerations(q, qd, tau), _tol(_kappa(model, method, q)))
+        for h in (1e-3, 1e-2):
+            _close(
+                fast.implicit_penalty_velocity(q, qd, tau, h),
+                ref.implicit_penalty_velocity(q, qd, tau, h),
+                _tol(_kappa(model, method, q, h)),
+            )
+    assert fast.evaluations == ref.evaluations
+
+
+@pytest.mark.parametrize("kind", METHODS)
+@pytest.mark.parametrize("name,model", MODELS, ids=MODEL_IDS)
+def test_evaluate_every_term(name, model, kind):
+    """Every field of :class:`Evaluation`, the energies and the closure reductions agree."""
+    rng = np.random.default_rng(7)
+    method = _method(kind, model.n_rows, rng)
+    ref, fast = Mechanism(model, method), FastMechanism(model, method)
+    for q, qd, tau in _states(rng, model, method, 5):
+        a, b = ref.evaluate(q, qd, tau), fast.evaluate(q, qd, tau)
+        tol = _tol(_kappa(model, method, q))
+        assert isinstance(b, FastEvaluation)
+        for field in ("theta", "origin", "omega", "v_origin", "a_origin", "n_pred", "rotation", "slide"):
+            _close(getattr(b.dyn.kin, field), getattr(a.dyn.kin, field))
+        _close(b.dyn.mass_matrix, a.dyn.mass_matrix)
+        _close(b.dyn.bias, a.dyn.bias)
+        _close(b.dyn.com, a.dyn.com)
+        _close(b.dyn.com_velocity, a.dyn.com_velocity)
+        for field in ("residual", "rate", "jacobian", "bias", "row_direction", "points"):
+            _close(getattr(b.closure, field), getattr(a.closure, field))
+        _close(b.qdd, a.qdd, tol)
+        _close(b.row_force, a.row_force, tol)
+        _close(fast.energies(b, qd), ref.energies(a, qd))
+        _close(fast.energies(a, qd), ref.energies(a, qd))  # a reference Evaluation also works
+        _close(fast.closures.errors(b.closure), ref.closures.errors(a.closure))
+        _close(
+            fast.closures.closure_forces(b.closure, b.row_force),
+            ref.closures.closure_forces(a.closure, a.row_force),
+            tol,
+        )
+        guard = ref.closures.errors(ref.closures.evaluate(forward_kinematics(model, q), jacobian=False))
+        _close(fast.closure_errors(q), guard)
+
+
+def test_evaluations_do_not_share_memory():
+    """Arrays returned by one call are not overwritten by the next."""
+    model = load_scene("four_bar").model
+    fast = FastMechanism(model, _method("penalty", model.n_rows))
+    q, qd = model.initial_state()
+    tau = np.zeros(model.n)
+    first = fast.evaluate(q, qd, tau)
+    qdd = fast.accelerations(q, qd, tau)
+    kept = (first.qdd.copy(), first.dyn.mass_matrix.copy(), first.closure.residual.copy(), qdd.copy())
+    fast.evaluate(q + 0.3, qd - 1.0, tau + 2.0)
+    fast.accelerations(q + 0.3, qd - 1.0, tau + 2.0)
+    for now, then in zip((first.qdd, first.dyn.mass_matrix, first.closure.residual, qdd), kept, strict=True):
+        np.testing.assert_array_equal(now, then)
+
+
+def test_rank_deficient_exact_closure():
+    """A closure written twice makes ``A M^-1 A^T`` singular: minimum-norm multipliers.
+
+    Both copies then carry half of the force, and the motion is that of the single closure.
+    """
+    single = load_scene("four_bar").model
+    twice = Model.build(
+        "four_bar_twice", single.chains, single.links, single.joints,
+        single.closures + tuple(replace(c, name=c.name + "_again") for c in single.closures),
+        single.actuators, single.points, tuple(single.gravity),
+    )
+    rng = np.random.default_rng(11)
+    q0, qd0 = single.initial_state()
+    for q, qd in [(q0, qd0)] + [(q0 + 0.1 * rng.normal(size=3), rng.normal(size=3)) for _ in range(5)]:
+        tau = rng.normal(size=3)
+        a = Mechanism(twice, ExactClosure()).evaluate(q, qd, tau)
+        b = FastMechanism(twice, ExactClosure()).evaluate(q, qd, tau)
+        one = FastMechanism(single, ExactClosure()).evaluate(q, qd, tau)
+        _close(b.qdd, a.qdd)
+        _close(b.row_force, a.row_force)
+        _close(b.qdd, one.qdd)
+        _close(b.row_force, 0.5 * np.concatenate((one.row_force, one.row_force)))
+
+
+@pytest.mark.parametrize("name", [s for s in SCENES if load_scene(s).model.n_rows])
+def test_project(name):
+    """Projection onto the closure manifold gives the same ``q`` and ``qd``."""
+    model = load_scene(name).model
+    rng = np.random.default_rng(3)
+    ref, fast = Mechanism(model, ExactClosure()), FastMechanism(model, ExactClosure())
+    q0, qd0 = model.initial_state()
+    for scale in (1e-3, 1e-2):
+        q = q0 + scale * rng.normal(size=model.n)
+        qd = qd0 + rng.normal(size=model.n)
+        qa, va = ref.project(q, qd)
+        qb, vb = fast.project(q, qd)
+        _close(qb, qa, 1e-10)  # Gauss-Newton stops at |C| <= 1e-12: iterates agree to ~tol / |A|
+        _close(vb, va, 1e-10)
+
+
+def test_singular_mass_matrix_raises_like_numpy():
+    """An exactly singular ``M`` raises ``LinAlgError`` from both implementations."""
+    link = Link("massless", 0, 1.0, 0.0, 0.0, (0.5, 0.0))
+    model = Model.build(
+        "massless", (Chain("c", (0.0, 0.0), 0.0, 0.0, (0,)),), (link,), (Joint("j", REVOLUTE, 0.3, 0.0),)
+    )
+    q, qd = model.initial_state()
+    tau = np.zeros(1)
+    for mech in (Mechanism(model, ExactClosure()), FastMechanism(model, ExactClosure(), warm_up=False)):
+        with pytest.raises(np.linalg.LinAlgError):
+            mech.accelerations(q, qd, tau)
+
+
+# ---------------------------------------------------------------------------------- integrators
+FUSED = [
+    (ExplicitEuler, FusedExplicitEuler),
+    (SemiImplicitEuler, FusedSemiImplicitEuler),
+    (RK4, FusedRK4),
+    (ImplicitPenaltyEuler, FusedImplicitPenaltyEuler),
+]
+
+
+@pytest.mark.parametrize("kind", METHODS)
+@pytest.mark.parametrize("plain,fused", FUSED, ids=[p.name for p, _ in FUSED])
+def test_fused_ticks_match_stepwise(plain, fused, kind):
+    """A compiled tick equals the integrator's own steps on the same mechanism."""
+    model = _mixed_model(np.random.default_rng(5))
+    method = _method(kind, model.n_rows)
+    a, b = FastMechanism(model, method), FastMechanism(model, method)
+    q, qd = model.initial_state()
+    tau = np.linspace(-1.0, 1.0, model.n)
+    qa, va = plain().advance(a, 0.0, q, qd, tau, 1e-3, 3)
+    qb, vb = fused().advance(b, 0.0, q, qd, tau, 1e-3, 3)
+    _close(qb, qa)
+    _close(vb, va)
+    assert a.evaluations == b.evaluations
+    # on a reference mechanism the fused class falls back to the plain steps
+    ref = Mechanism(model, method)
+    qc, vc = fused().advance(ref, 0.0, q, qd, tau, 1e-3, 3)
+    _close(qc, qa)
+    _close(vc, va)
+
+
+def test_fuse_integrator_choices():
+    """Fixed-step methods on a fast mechanism are fused; anything else is left as it is."""
+    model = load_scene("four_bar").model
+    fast = FastMechanism(model, _method("penalty", model.n_rows))
+    ref = Mechanism(model, _method("penalty", model.n_rows))
+    for name in ("explicit_euler", "semi_implicit_euler", "rk4", "implicit_euler"):
+        plain = make_integrator(name)
+        fused = fuse_integrator(plain, fast)
+        assert fused is not plain and fused.name == plain.name and fused.order == plain.order
+        assert isinstance(fused, type(plain))
+        assert fuse_integrator(plain, ref) is plain
+    adaptive = make_integrator("rk45")
+    assert fuse_integrator(adaptive, fast) is adaptive
+    assert FusedRK4().stability_bound(0.0) == pytest.approx(RK4().stability_bound(0.0))
+
+
+def test_make_mechanism():
+    model = load_scene("four_bar").model
+    method = _method("exact", model.n_rows)
+    assert type(make_mechanism(model, method, "numpy")) is Mechanism
+    assert isinstance(make_mechanism(model, method, "numba"), FastMechanism)
+    assert isinstance(make_mechanism(model, method), FastMechanism)
+    with pytest.raises(ValueError, match="kernel"):
+        make_mechanism(model, method, "cuda")
+
+
+def test_advance_fixed_rejects_unknown_method():
+    model = load_scene("pendulum").model
+    fast = FastMechanism(model, _method("penalty", model.n_rows))
+    q, qd = model.initial_state()
+    with pytest.raises(ValueError, match="method"):
+        fast.advance_fixed(99, q, qd, np.zeros(model.n), 1e-3, 1)
+
+
+def _simulator(scene, kind: str, fast: bool) -> Simulator:
+    gains = dict(scene.gains) if scene.gains.get("method", "penalty") == kind else {}
+    settings = SimulationSettings(integrator="rk4", closure=kind, rate=1000.0)
+    sim = Simulator(scene.model, settings, gains)
+    if fast:
+        sim.mechanism = FastMechanism(scene.model, sim.method)
+        sim.integrator = fuse_integrator(sim.integrator, sim.mechanism)
+    if scene.model.actuators:
+        sim.set_efforts(np.full(len(scene.model.actuators), 0.5))
+    return sim
+
+
+@pytest.mark.parametrize("kind", METHODS)
+@pytest.mark.parametrize("name", SCENES)
+def test_one_second_rk4_run(name, kind):
+    """1 s of RK4 at 1 kHz: same trajectory to ``RUN_TOL`` and the same evaluation count."""
+    scene = load_scene(name)
+    ref, fast = _simulator(scene, kind, False), _simulator(scene, kind, True)
+    assert isinstance(fast.integrator, FusedRK4)
+    for _ in range(1000):
+        ref.advance()
+        fast.advance()
+    assert fast.t == ref.t
+    np.testing.assert_allclose(fast.q, ref.q, rtol=0, atol=RUN_TOL)
+    np.testing.assert_allclose(fast.qd, ref.qd, rtol=0, atol=RUN_TOL)
+    assert fast.mechanism.evaluations == ref.mechanism.evaluations
+    a, b = ref.sample(), fast.sample()
+    np.testing.assert_allclose(b.energy, a.energy, rtol=0, atol=RUN_TOL * max(1.0, np.max(np.abs(a.energy))))
+    np.testing.assert_allclose(b.closure_force, a.closure_force, rtol=1e-6, atol=1e-6)
+
+
+def test_kernel_without_compilation():
+    """With numba's JIT disabled the kernel runs as plain Python and gives the same results."""
+    script = (
+        "import numpy as np\n"
+        "from vjm_ros.constraints import ExactClosure, PenaltyClosure\n"
+        "from vjm_ros.fast import FastMechanism, FusedRK4\n"
+        "from vjm_ros.scene import load_scene\n"
+        "from vjm_ros.system import Mechanism\n"
+        "worst = 0.0\n"
+        "for name in ('four_bar', 'rrr_platform', 'double_slider'):\n"
+        "    m = load_scene(name).model\n"
+        "    q, qd = m.initial_state()\n"
+        "    tau = np.ones(m.n)\n"
+        "    r = m.n_rows\n"
+        "    for method in (ExactClosure(), PenaltyClosure(np.full(r, 1e5), np.full(r, 1e2))):\n"
+        "        a, b = Mechanism(m, method), FastMechanism(m, method)\n"
+        "        x, y = a.accelerations(q, qd, tau), b.accelerations(q, qd, tau)\n"
+        "        worst = max(worst, np.max(np.abs(x - y)) / np.max(np.abs(x)))\n"
+        "        x = FusedRK4().advance(a, 0.0, q, qd, tau, 1e-3, 2)[1]\n"
+        "        y = FusedRK4().advance(b, 0.0, q, qd, tau, 1e-3, 2)[1]\n"
+        "        worst = max(worst, np.max(np.abs(x - y)) / np.max(np.abs(x)))\n"
+        "print(worst)\n"
+    )
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    out = subprocess.run(
+        [sys.executable, "-W", "error", "-c", script], env=env, capture_output=True, text=True,
+        timeout=300, check=True,
+    )
+    assert float(out.stdout.strip().splitlines()[-1]) <= RTOL
