@@ -18,13 +18,14 @@ the acceleration uses ``qdd`` the same way.
 Figures are plain :class:`matplotlib.figure.Figure` objects drawn by the Agg canvas, so no pyplot
 state is touched and nothing needs a display. Time series longer than a few thousand samples are
 reduced to the smallest and largest value of each of a few thousand time buckets, which keeps every
-peak of the full series (and therefore the axis limits) while drawing 10^5-row runs in well under a
-second per figure.
+peak of the full series (and therefore the axis limits) and keeps the drawing time of long runs
+nearly independent of their length.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +114,8 @@ def write_figures(
     }
     paths = []
     for stem in FIGURE_NAMES:
-        fig = builders[stem](traj, name)
+        with np.errstate(invalid="ignore", over="ignore"):
+            fig = builders[stem](traj, name)
         path = out / f"{stem}.png"
         fig.savefig(path, dpi=dpi)
         fig.clear()
@@ -135,7 +137,8 @@ def absolute_rates(model: Model, rates: np.ndarray) -> np.ndarray:
     ndarray, shape (rows, n)
         ``omega_i = sum_k ancestors[i, k] is_revolute[k] rates_k``, rad/s (rad/s^2).
     """
-    return (rates * model.is_revolute[None, :]) @ model.ancestors.T
+    with np.errstate(invalid="ignore", over="ignore"):  # a diverged run keeps its NaN rows
+        return (rates * model.is_revolute[None, :]) @ model.ancestors.T
 
 
 # ---------------------------------------------------------------------------- figures
@@ -167,10 +170,10 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
         base = to_rgb(f"C{c % 10}")
         cmap = _shade_map(base)
         cmaps.append(cmap)
-        style = _CHAIN_STYLES[c % len(_CHAIN_STYLES)]
+        style = _chain_style(c)
         if not chain.links:
             continue
-        lines = _chain_polylines(segments[poses], chain.origin, chain.links)
+        lines = _chain_polylines(segments[poses], chain.links)
         coll = LineCollection(
             list(lines),
             colors=cmap(0.15 + 0.85 * shade),
@@ -188,41 +191,33 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
         xy = points[:, p]
         idx = _envelope_index(xy, MAX_LINE_POINTS)
         c = tip_chain.get(point.name)
-        if c is not None:
-            color, ls, label = cmaps[c](1.0), "-", f"{point.name} trace"
-        else:
-            color, ls, label = "0.35", "--", f"{point.name} trace"
-        (line,) = ax.plot(xy[idx, 0], xy[idx, 1], ls=ls, lw=1.3, color=color, zorder=4, label=label)
+        color, ls = (cmaps[c](1.0), "-") if c is not None else ("0.35", "--")
+        (line,) = ax.plot(
+            xy[idx, 0],
+            xy[idx, 1],
+            ls=ls,
+            lw=1.3,
+            color=color,
+            zorder=4,
+            label=f"{point.name} trace",
+        )
         handles.append(line)
 
-    ground, guides = _ground_features(model)
-    if len(ground):
-        (mark,) = ax.plot(
-            ground[:, 0],
-            ground[:, 1],
-            ls="none",
-            marker="^",
-            ms=10,
-            mfc="0.85",
-            mec="k",
-            mew=1.0,
-            zorder=5,
-            label="ground point",
-        )
-        ax.plot(ground[:, 0], ground[:, 1], "k.", ms=4, zorder=6)
-        handles.append(mark)
-    for k, (origin, direction) in enumerate(guides):
-        ax.axline(
-            tuple(origin),
-            xy2=tuple(origin + direction),
-            color="0.4",
-            lw=0.8,
-            ls=(0, (6, 3)),
-            zorder=1,
-            label="slider guide" if k == 0 else None,
-        )
-    if guides:
-        handles.append(Line2D([], [], color="0.4", lw=0.8, ls=(0, (6, 3)), label="slider guide"))
+    ground = _ground_geometry(model, segments[0])
+    for k, (start, end) in enumerate(ground.links):
+        ax.plot(*np.transpose([start, end]), color="0.25", lw=2.5, solid_capstyle="round", zorder=1)
+        if k == 0:
+            handles.append(Line2D([], [], color="0.25", lw=2.5, label="ground link"))
+    guide_style = {"color": "0.4", "lw": 0.8, "ls": (0, (6, 3)), "zorder": 1}
+    for origin, direction in ground.guides:
+        ax.axline(tuple(origin), xy2=tuple(origin + direction), **guide_style)
+    if ground.guides:
+        handles.append(Line2D([], [], label="slider guide", **guide_style))
+    if len(ground.pivots):
+        pivot_style = {"ls": "none", "marker": "^", "ms": 10, "mfc": "0.85", "mec": "k", "mew": 1.0}
+        ax.plot(ground.pivots[:, 0], ground.pivots[:, 1], zorder=5, **pivot_style)
+        ax.plot(ground.pivots[:, 0], ground.pivots[:, 1], "k.", ms=4, zorder=6)
+        handles.append(Line2D([], [], label="ground point", **pivot_style))
 
     ax.autoscale_view()
     ax.margins(0.08)
@@ -230,14 +225,20 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.grid(True, lw=0.4, alpha=0.5)
-    ax.set_title(f"{name}: chrono-cyclograph, {len(poses)} poses over t = {t[0]:.3g} to {t[-1]:.3g} s")
-    _legend(ax, handles)
+    if len(poses) > 1:
+        when = f"{len(poses)} poses over t = {t[0]:.3g} to {t[-1]:.3g} s"
+    else:
+        when = f"pose at t = {t[0]:.3g} s"
+    ax.set_title(f"{name}: chrono-cyclograph, {when}")
+    _legend(ax, handles, below=True)
 
-    single = len(model.chains) == 1
-    bar_map = cmaps[0] if single else _shade_map((0.0, 0.0, 0.0))
-    sm = ScalarMappable(norm=Normalize(t[0], t[-1] if t[-1] > t[0] else t[0] + 1.0), cmap=bar_map)
-    bar = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
-    bar.set_label("pose time t (s)" + ("" if single else ", shade of each chain colour"))
+    if len(poses) > 1:
+        single = len(model.chains) == 1
+        bar_map = cmaps[0] if single else _shade_map((0.0, 0.0, 0.0))
+        t_end = t[-1] if t[-1] > t[0] else t[0] + 1.0
+        sm = ScalarMappable(norm=Normalize(t[0], t_end), cmap=bar_map)
+        bar = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
+        bar.set_label("pose time t (s)" + ("" if single else ", shade of each chain colour"))
     return fig
 
 
@@ -336,7 +337,9 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     fig.suptitle(f"{name}: constraint forces at the closure points")
     if panels == 0:
         ax = fig.add_subplot()
-        ax.text(0.5, 0.5, "no closures in this scene", ha="center", va="center", transform=ax.transAxes)
+        ax.text(
+            0.5, 0.5, "no closures in this scene", ha="center", va="center", transform=ax.transAxes
+        )
         ax.set_xlabel("t (s)")
         ax.set_ylabel("force (N)")
         return fig
@@ -420,7 +423,14 @@ def _motion_figure(
 
     ax = axes[0]
     for i, link in enumerate(model.links):
-        _series(ax, t, angular[:, i], color=_link_color(i, model.n), ls=_chain_style(link.chain), label=link.name)
+        _series(
+            ax,
+            t,
+            angular[:, i],
+            color=_link_color(i, model.n),
+            ls=_chain_style(link.chain),
+            label=link.name,
+        )
     ax.set_ylabel(ylabels[0])
     ax.set_title(panel_titles[0], fontsize="medium")
     _legend(ax, ax.get_lines())
@@ -430,7 +440,14 @@ def _motion_figure(
         for i in prismatic:
             joint_i = model.joints[i]
             chain = model.links[i].chain
-            _series(ax, t, joint[:, i], color=_link_color(i, model.n), ls=_chain_style(chain), label=joint_i.name)
+            _series(
+                ax,
+                t,
+                joint[:, i],
+                color=_link_color(i, model.n),
+                ls=_chain_style(chain),
+                label=joint_i.name,
+            )
         ax.set_ylabel(ylabels[1])
         ax.set_title(panel_titles[1], fontsize="medium")
         _legend(ax, ax.get_lines())
@@ -438,7 +455,9 @@ def _motion_figure(
     return fig
 
 
-def _series(ax, t: np.ndarray, y: np.ndarray, *, color, ls: str, label: str, lw: float = 1.2) -> None:
+def _series(
+    ax, t: np.ndarray, y: np.ndarray, *, color, ls: str, label: str, lw: float = 1.2
+) -> None:
     """Plot one time series, reduced to its per-bucket extremes when long."""
     idx = _envelope_index(y, MAX_LINE_POINTS)
     ax.plot(t[idx], y[idx], color=color, ls=ls, lw=lw, label=label)
@@ -453,21 +472,20 @@ def _time_axes(axes: Sequence, t: np.ndarray) -> None:
     axes[-1].set_xlabel("t (s)")
 
 
-def _legend(ax, handles: Sequence) -> None:
-    """Legend to the right of the axes (kept off the curves), unless there are too many entries."""
+def _legend(ax, handles: Sequence, below: bool = False) -> None:
+    """Legend outside the axes (kept off the curves), unless there are too many entries.
+
+    To the right of the axes by default; under them when ``below`` (the right side then holds a
+    colour bar).
+    """
     handles = [h for h in handles if not str(h.get_label()).startswith("_")]
     if not handles or len(handles) > MAX_LEGEND_ENTRIES:
         return
-    ncol = 1 if len(handles) <= 12 else 2
-    ax.legend(
-        handles=handles,
-        loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
-        borderaxespad=0.0,
-        fontsize="small",
-        ncol=ncol,
-        frameon=False,
-    )
+    if below:
+        place = {"loc": "upper center", "bbox_to_anchor": (0.5, -0.1), "ncol": min(len(handles), 3)}
+    else:
+        place = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "ncol": 1 + len(handles) // 13}
+    ax.legend(handles=handles, borderaxespad=0.0, fontsize="small", frameon=False, **place)
 
 
 def _envelope_index(y: np.ndarray, max_points: int) -> np.ndarray:
@@ -488,21 +506,19 @@ def _envelope_index(y: np.ndarray, max_points: int) -> np.ndarray:
     rows = len(y)
     if rows <= max_points:
         return np.arange(rows)
-    y2 = y.reshape(rows, -1)
     buckets = max(max_points // 2, 1)
     width = rows // buckets
     body = buckets * width
     starts = np.arange(buckets) * width
-    parts = [np.array([0, rows - 1]), np.arange(body, rows)]
-    for col in y2.T:
-        block = col[:body].reshape(buckets, width)
-        finite = np.where(np.isfinite(block), block, np.nan)
-        if np.all(np.isnan(finite)):
-            continue
-        filled_lo = np.where(np.isnan(finite), np.inf, finite)
-        filled_hi = np.where(np.isnan(finite), -np.inf, finite)
-        parts.append(starts + np.argmin(filled_lo, axis=1))
-        parts.append(starts + np.argmax(filled_hi, axis=1))
+    parts = [np.array([0, rows - 1])]
+    for col in y.reshape(rows, -1).T:
+        finite = np.isfinite(col)
+        lo = np.where(finite, col, np.inf)
+        hi = np.where(finite, col, -np.inf)
+        parts.append(starts + np.argmin(lo[:body].reshape(buckets, width), axis=1))
+        parts.append(starts + np.argmax(hi[:body].reshape(buckets, width), axis=1))
+        if body < rows:
+            parts.append(body + np.array([np.argmin(lo[body:]), np.argmax(hi[body:])]))
     return np.unique(np.concatenate(parts))
 
 
@@ -515,39 +531,70 @@ def _pose_rows(t: np.ndarray, count: int) -> np.ndarray:
     return np.unique(rows)
 
 
-def _chain_polylines(segments: np.ndarray, origin: Sequence[float], links: Sequence[int]) -> np.ndarray:
-    """One polyline per pose: ground point, then start and end of each link of the chain.
+def _chain_polylines(segments: np.ndarray, links: Sequence[int]) -> np.ndarray:
+    """One polyline per pose through the start and end of each link of a chain.
 
     The pieces between the end of a link and the start of the next one are the joint slides
     (zero length for revolute joints with no slide), so the chain is drawn connected.
 
     Returns
     -------
-    ndarray, shape (poses, 1 + 2 * len(links), 2)
+    ndarray, shape (poses, 2 * len(links), 2)
     """
-    poses = len(segments)
-    chain = segments[:, list(links)].reshape(poses, 2 * len(links), 2)
-    ground = np.broadcast_to(np.asarray(origin, dtype=float), (poses, 1, 2))
-    return np.concatenate((ground, chain), axis=1)
+    return segments[:, list(links)].reshape(len(segments), 2 * len(links), 2)
 
 
-def _ground_features(model: Model) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
-    """Fixed points (chain origins, ground hinge targets) and ground slider guide lines."""
-    pts = [np.asarray(ch.origin, dtype=float) for ch in model.chains]
+@dataclass(frozen=True)
+class _Ground:
+    """Fixed geometry of a scene, m: pivots (n, 2), ground links and slider guide lines."""
+
+    pivots: np.ndarray
+    links: list[tuple[np.ndarray, np.ndarray]]
+    guides: list[tuple[np.ndarray, np.ndarray]]
+
+
+def _ground_geometry(model: Model, segments: np.ndarray) -> _Ground:
+    """Ground points, ground links and slider guides of a scene.
+
+    Each chain contributes its ground point ``O``; a ground link from ``O`` to its first joint
+    when that is not at ``O``; the first joint as a fixed pivot if revolute, or the guide line
+    through it along ``n(theta1)`` if prismatic. Hinge closures to the ground add their target
+    point, slider closures to the ground their line.
+
+    Parameters
+    ----------
+    model : Model
+    segments : ndarray, shape (n, 2, 2)
+        Link segments of one pose (the first joint of a revolute chain does not move).
+    """
+    pivots = []
+    links = []
     guides = []
+    for chain in model.chains:
+        origin = np.asarray(chain.origin, dtype=float)
+        pivots.append(origin)
+        if not chain.links:
+            continue
+        first = chain.links[0]
+        u = np.array([np.cos(chain.angle), np.sin(chain.angle)])
+        if model.is_revolute[first]:
+            joint = segments[first, 0]
+            pivots.append(joint)
+        else:
+            joint = origin + chain.length * u
+            guides.append((joint, np.array([-u[1], u[0]])))
+        if np.linalg.norm(joint - origin) > 0:
+            links.append((origin, joint))
     for c in model.closures:
         if c.target.link != GROUND:
             continue
         target = np.asarray(c.target.local, dtype=float)
         if c.kind == HINGE:
-            pts.append(target)
-        elif c.kind == SLIDER:
-            direction = np.asarray(c.direction, dtype=float)
-            if np.linalg.norm(direction) > 0:
-                guides.append((target, direction))
-    if not pts:
-        return np.zeros((0, 2)), guides
-    return np.unique(np.round(np.array(pts), 12), axis=0), guides
+            pivots.append(target)
+        elif c.kind == SLIDER and np.linalg.norm(c.direction) > 0:
+            guides.append((target, np.asarray(c.direction, dtype=float)))
+    unique = np.unique(np.round(np.array(pivots), 12), axis=0) if pivots else np.zeros((0, 2))
+    return _Ground(unique, links, guides)
 
 
 def _shade_map(base: Sequence[float]) -> LinearSegmentedColormap:
@@ -558,7 +605,7 @@ def _shade_map(base: Sequence[float]) -> LinearSegmentedColormap:
     return LinearSegmentedColormap.from_list("pose_shade", [light, base, dark])
 
 
-def _link_color(i: int, n: int):
+def _link_color(i: int, n: int) -> str | tuple[float, ...]:
     """Colour of link ``i`` among ``n`` (tab10 while it suffices, then tab20)."""
     return f"C{i % 10}" if n <= 10 else colormaps["tab20"](i % 20)
 
@@ -566,4 +613,3 @@ def _link_color(i: int, n: int):
 def _chain_style(chain: int) -> str:
     """Line style of a chain (first chain solid, second dashed, third dotted, as in the thesis)."""
     return _CHAIN_STYLES[chain % len(_CHAIN_STYLES)]
-
