@@ -6,6 +6,7 @@ A control tick of length ``dt = 1 / rate`` holds the efforts constant and advanc
 
 from __future__ import annotations
 
+import collections
 import importlib.util
 from dataclasses import dataclass, field, replace
 
@@ -300,6 +301,7 @@ class Simulator:
         """Back to the scene's initial state (t = 0, zero efforts)."""
         self.t = 0.0
         self.ticks = 0
+        self._history: collections.deque = collections.deque(maxlen=32)
         self.q = self.q0.copy()
         self.qd = self.qd0.copy()
         self.efforts = np.zeros(len(self.model.actuators))
@@ -347,6 +349,7 @@ class Simulator:
         """
         if efforts is not None:
             self.set_efforts(efforts)
+        self._history.append((self.t, self.q, self.qd))
         with np.errstate(all="ignore"):
             try:
                 q, qd = self.integrator.advance(
@@ -391,6 +394,7 @@ class Simulator:
                 )
 
     def _likely_cause(self) -> str:
+        """Name the likely cause of a divergence, judged at the last good state."""
         if isinstance(self.method, PenaltyClosure) and self.stiffness_report:
             worst = max(self.stiffness_report, key=lambda r: r["omega_h"] / max(r["bound"], 1e-12))
             if worst["omega_h"] > 0.5 * worst["bound"]:
@@ -399,20 +403,38 @@ class Simulator:
                     f"{worst['bound']:.3g} for {self.settings.integrator}); lower the gains, add "
                     "substeps, or use implicit_euler or --closure exact"
                 )
-        sigma = self.smallest_singular_value()
-        if np.isfinite(sigma) and sigma < 1e-3:
+        # Judge the pose over the last good ticks: a blow-up leaves the singular pose quickly.
+        worst = None
+        for t, q, qd in self._history:
+            sv = self._singular_values(q, qd)
+            if sv.size and sv[0] > 0:
+                ratio = sv[-1] / sv[0]
+                if worst is None or ratio < worst[0]:
+                    worst = (ratio, t, sv[-1], sv[0])
+        if worst is not None and worst[0] < 1e-3:
             return (
-                f"a singular pose (smallest singular value of the closure Jacobian {sigma:.2g}); "
-                "use --closure exact, a smaller step, or start away from the singularity"
+                f"a singular pose (closure Jacobian singular values {worst[2]:.2g} to "
+                f"{worst[3]:.2g} at t = {worst[1]:.6g} s); "
+                + (
+                    "exact closure asks for unbounded forces there: start away from the "
+                    "singularity, or use penalty closure, which yields"
+                    if isinstance(self.method, ExactClosure)
+                    else "use --closure exact, a smaller step, or start away from the singularity"
+                )
             )
         return "a step too large for the motion; add substeps or use an adaptive integrator"
 
     def smallest_singular_value(self) -> float:
         """Smallest singular value of the closure Jacobian at the current pose (nan if none)."""
-        if not self.model.n_rows or not all(np.isfinite(self.q)):
-            return float("nan")
-        ct = self.mechanism.closures.evaluate(forward_kinematics(self.model, self.q, self.qd))
-        return float(np.linalg.svd(ct.jacobian, compute_uv=False).min())
+        sv = self._singular_values(self.q, self.qd)
+        return float(sv[-1]) if sv.size else float("nan")
+
+    def _singular_values(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Singular values of the closure Jacobian at ``q``, largest first (empty if none)."""
+        if not self.model.n_rows or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            return np.zeros(0)
+        ct = self.mechanism.closures.evaluate(forward_kinematics(self.model, q, qd))
+        return np.linalg.svd(ct.jacobian, compute_uv=False)
 
     # ------------------------------------------------------------------ outputs
     def sample(self, singular_values: bool = False) -> Sample:
