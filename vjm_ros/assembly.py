@@ -29,6 +29,7 @@ def assemble(
     fixed: list[int],
     tolerance: float = 1e-10,
     max_iterations: int = 100,
+    max_evaluations: int = 300,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Solve the free coordinates so that ``C(q) = 0`` and ``A qd = 0``.
 
@@ -41,12 +42,22 @@ def assemble(
     tolerance : float
         Largest acceptable ``|C|`` after assembly, m or rad.
     max_iterations : int
+        Gauss-Newton steps at most.
+    max_evaluations : int
+        Residual evaluations at most, line-search trials included. Assemblies that succeed take a
+        few dozen; the budget bounds the time spent on geometry that cannot be closed, where
+        each iteration would otherwise halve its step some twenty times for little progress.
 
     Returns
     -------
     q, qd : ndarray, shape (n,)
     residual : float
-        ``max |C|`` reached.
+        ``max |C|`` reached (``nan`` or ``inf`` if the guesses give a non-finite residual).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If a least-squares step fails (only for non-finite or absurdly scaled input).
     """
     closures = ClosureSet(model)
     q, qd = model.initial_state()
@@ -59,19 +70,24 @@ def assemble(
 
     terms = evaluate(q)
     err = float(np.max(np.abs(terms.residual)))
+    if not np.isfinite(err):
+        return q, qd, err
+    evaluations = 1
     for _ in range(max_iterations):
         if err <= 0.01 * tolerance or free.size == 0:
             break
         a = terms.jacobian[:, free]
         step = np.linalg.lstsq(a, -terms.residual, rcond=1e-12)[0]
         scale = 1.0
-        while scale > 1e-6:
+        while scale > 1e-6 and evaluations < max_evaluations:
             trial = q.copy()
             trial[free] += scale * step
-            t_terms = evaluate(trial)
-            t_err = float(np.max(np.abs(t_terms.residual)))
+            # Trials need only the residual; the Jacobian is formed for the accepted one.
+            t_res = closures.evaluate(forward_kinematics(model, trial), jacobian=False).residual
+            evaluations += 1
+            t_err = float(np.max(np.abs(t_res)))
             if np.isfinite(t_err) and t_err < err:
-                q, terms, err = trial, t_terms, t_err
+                q, terms, err = trial, evaluate(trial), t_err
                 break
             scale *= 0.5
         else:
