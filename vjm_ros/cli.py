@@ -154,13 +154,13 @@ def main(argv: list[str] | None = None) -> int:
             from .replay import replay
 
             out = args.output or args.mcap.with_suffix(".rrd")
-            info = replay(args.mcap, out)
+            info = _log_io(lambda: replay(args.mcap, out), args.mcap)
             print(json.dumps({"rrd": str(out), **(info or {})}))
             return 0
         if args.command == "recover":
             from .replay import recover
 
-            count = recover(args.mcap, args.output)
+            count = _log_io(lambda: recover(args.mcap, args.output), args.mcap)
             print(f"recovered {count} messages into {args.output}")
             return 0
     except (SceneError, ConfigurationError) as exc:
@@ -170,6 +170,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"vjm: error: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _log_io(action, path: Path):
+    """Run a log read/write; turn I/O and format failures into a ConfigurationError."""
+    if not path.is_file():
+        raise ConfigurationError(f"{path}: expected an MCAP file, found no such file")
+    try:
+        return action()
+    except VjmError:
+        raise
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ConfigurationError(f"{path}: {exc}") from None
 
 
 def _cmd_scenes() -> int:
@@ -301,7 +313,7 @@ def _open_recorders(args, scene, sim) -> list:
             from .recorders.rerun_recorder import RerunRecorder
 
             recorders.append(RerunRecorder(args.rrd, scene.model, sim.describe()))
-    except OSError as exc:
+    except (OSError, RuntimeError, ValueError) as exc:
         for rec in recorders:
             rec.close()
         raise ConfigurationError(f"cannot open log file: {exc}") from None

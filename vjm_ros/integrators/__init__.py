@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from ..errors import ConfigurationError
 from .adaptive import AdaptiveIntegrator, Bdf, Dop853, Lsoda, RadauIIA, Rk23, Rk45
 from .base import FixedStepIntegrator, Integrator
 from .fixed import RK4, ExplicitEuler, ExplicitRungeKutta, ImplicitPenaltyEuler, SemiImplicitEuler
@@ -43,13 +44,15 @@ def make_integrator(name: str, **options) -> Integrator:
 
     Raises
     ------
-    ValueError
-        For an unknown name; the message lists the known ones.
+    ConfigurationError
+        (a ``ValueError``) for an unknown name; the message lists the known ones.
     """
     try:
         cls = INTEGRATORS[name]
     except KeyError:
-        raise ValueError(f"unknown integrator {name!r}; known: {', '.join(INTEGRATORS)}") from None
+        raise ConfigurationError(
+            f"integrator: unknown name {name!r}; known: {', '.join(INTEGRATORS)}"
+        ) from None
     if issubclass(cls, AdaptiveIntegrator):
         return cls(**options)
     return cls()
