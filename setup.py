@@ -32,7 +32,7 @@ setup(
     ],
     extras_require={
         "test": ["pytest>=8", "pytest-benchmark>=4", "hypothesis>=6.100", "ruff>=0.5"],
-        "compare": ["mujoco>=4.0.1"],
+        "compare": ["mujoco>=3.2,!=4.0.0"],
     },
     zip_safe=True,
     maintainer="vjm_ros maintainers",
