@@ -205,6 +205,7 @@ class Simulator:
         self.divergence_limit = self.settings.divergence_limit
         if self.divergence_limit is None:
             scale = max(float(np.max(model.length, initial=0.0)), 0.1)
+            # A quarter of the longest link: the closure has come apart, not merely sagged.
             self.divergence_limit = 0.25 * scale
         self.reset()
 
@@ -374,7 +375,7 @@ class Simulator:
     def _guard(self) -> None:
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd))):
             raise DivergenceError(
-                self.t, "the state is no longer finite", None, self._likely_cause()
+                self.t, "the state is no longer finite", self._worst_closure(), self._likely_cause()
             )
         if self.model.n_rows and self.divergence_limit:
             if hasattr(self.mechanism, "closure_errors"):
@@ -392,6 +393,14 @@ class Simulator:
                     self.model.closures[worst].name,
                     self._likely_cause(),
                 )
+
+    def _worst_closure(self) -> str | None:
+        """Closure with the largest residual at the last good state (None without closures)."""
+        if not self.model.n_rows or not self._history:
+            return None
+        _, q, _ = self._history[-1]
+        terms = self.mechanism.closures.evaluate(forward_kinematics(self.model, q), jacobian=False)
+        return self.model.closures[int(np.argmax(self.mechanism.closures.errors(terms)))].name
 
     def _likely_cause(self) -> str:
         """Name the likely cause of a divergence, judged at the last good state."""
