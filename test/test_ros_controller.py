@@ -1,0 +1,176 @@
+"""The example controller: its inverse kinematics and gravity compensation against the model, and
+the five-bar's pin tracking a circle with the simulator and the controller as separate processes.
+"""
+
+import os
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
+
+import signal  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+
+from vjm_ros.constraints import ExactClosure  # noqa: E402
+from vjm_ros.ros.controller import FiveBarGeometry, make_law, tip_position  # noqa: E402
+from vjm_ros.ros.conversions import joint_arrays, seconds  # noqa: E402
+from vjm_ros.ros.runtime import Spinner  # noqa: E402
+from vjm_ros.scene import load_scene  # noqa: E402
+from vjm_ros.system import Mechanism  # noqa: E402
+
+DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
+ROOT = Path(__file__).resolve().parents[1]
+MODEL = load_scene("five_bar").model
+CENTER, RADIUS, PERIOD, APPROACH = np.array([0.7071, 0.5]), 0.1, 2.0, 1.0
+TRACKING_TOLERANCE = 0.005
+"""Largest distance of the pin from the circle after 2 s, m."""
+
+
+def circle_points(count=12):
+    phase = np.linspace(0.0, 2.0 * np.pi, count, endpoint=False)
+    return CENTER + RADIUS * np.column_stack((np.cos(phase), np.sin(phase)))
+
+
+def cross(a, b):
+    """z component of the cross product of planar vectors."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def test_inverse_kinematics_closes_the_mechanism_with_the_elbows_out():
+    geometry = FiveBarGeometry.from_model(MODEL)
+    q0 = MODEL.initial_state()[0]
+    mech = Mechanism(MODEL, ExactClosure())
+    for p in circle_points():
+        q = geometry.inverse(p, q0)
+        np.testing.assert_allclose(tip_position(MODEL, q), p, atol=1e-12)
+        terms = mech.evaluate(q, np.zeros(4), np.zeros(4))
+        assert np.max(np.abs(terms.closure.residual)) < 1e-12  # both chain tips on the pin
+        elbows = terms.dyn.kin.origin[[1, 3]]  # origins of the distal links
+        side = [cross(p - b, e - b) for b, e in zip(geometry.bases, elbows, strict=True)]
+        assert side[0] > 0 > side[1]  # left elbow counter-clockwise of its base-pin line
+
+
+def test_gravity_compensation_holds_the_mechanism_still():
+    law = make_law(MODEL, MODEL.initial_state()[0])
+    geometry = law.trajectory.geometry
+    mech = Mechanism(MODEL, ExactClosure(alpha=0.0, beta=0.0))
+    poses = [geometry.inverse(p, MODEL.initial_state()[0]) for p in circle_points(6)]
+    for q in [*poses, MODEL.initial_state()[0]]:
+        tau = law.selection @ law.gravity_efforts(q)
+        qdd = mech.accelerations(q, np.zeros(4), tau)
+        assert np.max(np.abs(qdd)) < 1e-9
+        free = mech.accelerations(q, np.zeros(4), np.zeros(4))
+        assert np.max(np.abs(free)) > 1.0  # without it the mechanism falls
+
+
+def test_desired_motion_starts_where_the_mechanism_is_and_joins_the_circle():
+    q0 = MODEL.initial_state()[0]
+    traj = make_law(MODEL, q0).trajectory
+    q, qd = traj.desired(0.0)
+    np.testing.assert_allclose(q, q0, atol=1e-12)
+    np.testing.assert_allclose(qd, 0.0, atol=1e-6)
+    for t in (APPROACH, APPROACH + 0.3, APPROACH + 1.7):
+        np.testing.assert_allclose(tip_position(MODEL, traj.joints(t)), traj.tip(t), atol=1e-12)
+    np.testing.assert_allclose(traj.tip(APPROACH + PERIOD / 4), CENTER + [-RADIUS, 0.0], atol=1e-12)
+
+
+def test_the_controller_refuses_a_scene_that_is_not_a_five_bar():
+    with pytest.raises(ValueError, match="two chains of two links"):
+        FiveBarGeometry.from_model(load_scene("four_bar").model)
+
+
+# ---------------------------------------------------------------- over ROS
+def spawn(module, *params):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(DOMAIN),
+               PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", module, "--ros-args"]
+    for p in params:
+        cmd += ["-p", p]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def reap(proc, sig=None, timeout=30.0):
+    if sig is not None and proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            out, _ = proc.communicate()
+    return proc.returncode, out
+
+
+@pytest.mark.ros
+def test_pin_tracks_the_circle_with_the_example_controller():
+    sim = spawn("vjm_ros.ros.node", "scene:=five_bar", "lockstep:=true", "lockstep_timeout:=2.0",
+                "realtime:=false", "duration:=3.0", "start_paused:=true", "command_timeout:=0.0")
+    ctl = spawn("vjm_ros.ros.controller")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN, signal_handler_options=SignalHandlerOptions.NO)
+    probe = rclpy.create_node("probe", context=ctx)
+    states, lock = [], threading.Lock()
+
+    def store(msg):
+        with lock:
+            states.append((seconds(msg.header.stamp), joint_arrays(msg, MODEL.joint_names)[0]))
+
+    probe.create_subscription(JointState, "/joint_states", store,
+                              QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE))
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(probe)
+    spinner = Spinner(executor).start()
+    try:
+        end = time.monotonic() + 30.0
+        while not (probe.count_subscribers("/joint_states") >= 2
+                   and probe.count_publishers("/vjm_sim_node/effort_commands") >= 1):
+            assert time.monotonic() < end and sim.poll() is None and ctl.poll() is None
+            time.sleep(0.05)
+        time.sleep(0.5)  # let the endpoints match
+        for kind, name, request in ((Trigger, "reset", Trigger.Request()),
+                                    (SetBool, "pause", SetBool.Request(data=False))):
+            client = probe.create_client(kind, f"/vjm_sim_node/{name}")
+            assert client.wait_for_service(timeout_sec=10.0)
+            future = client.call_async(request)
+            while not future.done():
+                time.sleep(0.01)
+            assert future.result().success
+        code, out = reap(sim, timeout=120.0)
+        assert code == 0, out
+        assert '"lockstep_timeouts": 0' in out, out  # the controller answered every tick
+    finally:
+        ctl_code, ctl_out = reap(ctl, signal.SIGINT)
+        reap(sim, signal.SIGINT)
+        spinner.stop()
+        executor.shutdown()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert ctl_code == 0, ctl_out
+    with lock:
+        t = np.array([s[0] for s in states])
+        q = np.array([s[1] for s in states])
+    t, first = np.unique(t, return_index=True)  # the state at t = 0 comes more than once
+    q = q[first]
+    assert t[-1] == pytest.approx(3.0) and len(t) == 3001
+    tips = np.array([tip_position(MODEL, qi) for qi in q])
+    late = t >= 2.0
+    radial = np.abs(np.linalg.norm(tips[late] - CENTER, axis=1) - RADIUS)
+    assert radial.max() < TRACKING_TOLERANCE
+    law = make_law(MODEL, q[0])
+    desired = np.array([law.trajectory.tip(ti) for ti in t[late]])
+    assert np.linalg.norm(tips[late] - desired, axis=1).max() < 2 * TRACKING_TOLERANCE
+    swept = np.unwrap(np.arctan2(*(tips[late] - CENTER).T[::-1]))
+    assert swept[-1] - swept[0] == pytest.approx(np.pi, rel=0.05)  # half a turn in one second

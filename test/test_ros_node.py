@@ -1,0 +1,604 @@
+"""``vjm_sim_node`` over real ROS 2: rates, stamps, trajectories, commands, services, parameters,
+and the executable's exit codes.
+
+Each in-process test gets a fresh ``rclpy.Context`` on this process's domain (``conftest.py``);
+the node's tick loop runs in a thread (as ``main()`` runs it in the main thread) and a probe node
+in the same context listens and commands. Subprocess tests run ``python -m vjm_ros.ros.node`` and
+always reap it. Assertions are on simulated time and tick counts, not on wall-clock jitter.
+"""
+
+import os
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
+
+import glob  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import re  # noqa: E402
+import signal  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from rcl_interfaces.msg import Log  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64MultiArray, String  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
+from vjm_ros.ros.node import SimNode, run  # noqa: E402
+from vjm_ros.ros.runtime import Spinner  # noqa: E402
+from vjm_ros.scene import load_scene  # noqa: E402
+from vjm_ros.simulator import SimulationSettings, Simulator  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
+ROOT = Path(__file__).resolve().parents[1]
+NODE = "/vjm_sim_node"
+DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def wait_for(predicate, timeout=10.0, what="condition"):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return
+        time.sleep(0.005)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+class Harness:
+    """The simulator node plus a probe node in one fresh context."""
+
+    def __init__(self, **params):
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=DOMAIN, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            self.node = SimNode(
+                context=self.ctx,
+                parameter_overrides=[Parameter(k, value=v) for k, v in params.items()],
+            )
+        except Exception:
+            rclpy.try_shutdown(context=self.ctx)
+            raise
+        self.probe = rclpy.create_node("probe", context=self.ctx)
+        self.lock = threading.Lock()
+        self.got: dict[str, list] = {}
+        self.listen("/joint_states", JointState)
+        self.listen(f"{NODE}/constraint_forces", Float64MultiArray)
+        self.listen(f"{NODE}/energy", Float64MultiArray)
+        self.listen(f"{NODE}/events", String)
+        self.listen("/clock", Clock)
+        self.listen("/diagnostics", DiagnosticArray)
+        self.listen(f"{NODE}/markers", MarkerArray)
+        for name in self.node.loop.sim.model.closure_names:
+            self.listen(f"{NODE}/closures/{name}/wrench", WrenchStamped)
+        self.logs = []
+        self.probe.create_subscription(
+            Log, "/rosout",
+            lambda m: self.logs.append(m) if m.name == "vjm_sim_node" else None, ROSOUT)
+        self.efforts = self.probe.create_publisher(Float64MultiArray, f"{NODE}/effort_commands", 10)
+        self.named = self.probe.create_publisher(JointState, f"{NODE}/joint_commands", 10)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.probe)
+        self.spinner = Spinner(self.executor).start()
+        self.thread = None
+        self.result = []
+
+    def listen(self, topic, kind, callback=None):
+        self.got[topic] = []
+
+        def store(msg):
+            with self.lock:
+                self.got[topic].append((msg, time.monotonic()))
+            if callback:
+                callback(msg)
+
+        self.probe.create_subscription(kind, topic, store, DEEP)
+
+    def on_joint_state(self, callback):
+        """Also call ``callback(msg)`` for every joint state."""
+        self.probe.create_subscription(JointState, "/joint_states", callback, DEEP)
+
+    def messages(self, topic):
+        with self.lock:
+            return [m for m, _ in self.got[topic]]
+
+    def start(self):
+        """Wait until every output and command topic is matched, then run the tick loop."""
+        def matched():
+            outs = all(p.get_subscription_count() > 0 for p in self.node.publishers
+                       if p.topic_name in self.got)
+            ins = self.efforts.get_subscription_count() > 0 and self.named.get_subscription_count() > 0
+            return outs and ins
+
+        wait_for(matched, what="discovery")
+        self.thread = threading.Thread(target=lambda: self.result.append(run(self.node)))
+        self.thread.start()
+
+    def join(self, timeout=60.0):
+        self.thread.join(timeout)
+        assert not self.thread.is_alive(), "the tick loop did not stop"
+        return self.result[0]
+
+    def call(self, kind, name, request, timeout=10.0):
+        client = self.probe.create_client(kind, name)
+        try:
+            assert client.wait_for_service(timeout_sec=timeout), f"no service {name}"
+            future = client.call_async(request)
+            wait_for(future.done, timeout, what=f"{name} response")
+            return future.result()
+        finally:
+            self.probe.destroy_client(client)
+
+    def close(self):
+        self.node.loop.stop()
+        if self.thread is not None:
+            self.thread.join(30.0)
+        self.spinner.stop()
+        self.executor.shutdown()
+        self.node.close()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def harness():
+    made = []
+
+    def make(**params):
+        h = Harness(**params)
+        made.append(h)
+        return h
+
+    yield make
+    for h in made:
+        h.close()
+
+
+def stamps_ns(msgs):
+    return [nanoseconds(m.header.stamp) for m in msgs]
+
+
+def plain_simulator(scene_name, rate=1000.0):
+    scene = load_scene(scene_name)
+    d = scene.defaults
+    settings = SimulationSettings(integrator=d.get("integrator", "rk4"), closure="penalty",
+                                  rate=rate, substeps=d.get("substeps", 1))
+    return Simulator(scene.model, settings, scene.gains)
+
+
+# ---------------------------------------------------------------- messages: live = log
+def fill(msg, values):
+    """A ROS message from the nested dict form of :mod:`vjm_ros.recorders.messages`."""
+    slots = msg.get_fields_and_field_types()
+    for key, value in values.items():
+        if isinstance(value, dict):
+            fill(getattr(msg, key), value)
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            package, name = slots[key][len("sequence<"):-1].split("/")
+            cls = getattr(__import__(f"{package}.msg", fromlist=[name]), name)
+            setattr(msg, key, [fill(cls(), v) for v in value])
+        else:
+            setattr(msg, key, value)
+    return msg
+
+
+def test_live_messages_equal_the_logged_ones():
+    from vjm_ros.recorders import messages as log
+    from vjm_ros.ros import conversions as conv
+
+    sim = plain_simulator("five_bar")
+    for _ in range(37):
+        sim.advance([1.0, -2.0])
+    s = sim.sample()
+    ns = log.seconds_to_ns(s.t)
+    names = sim.model.joint_names
+    assert conv.joint_state(names, s.t, s.q, s.qd, s.effort) == fill(
+        JointState(), log.joint_state(names, s, ns))
+    layout = conv.labelled_layout(sim.model.closure_names, 3)
+    assert conv.constraint_forces(layout, s.closure_force) == fill(
+        Float64MultiArray(), log.constraint_forces(sim.model.closure_names, s))
+    assert conv.energy(conv.labelled_layout(conv.ENERGY_LABELS, 1), s.energy) == fill(
+        Float64MultiArray(), log.energy(s))
+    assert conv.wrench(s.closure_force[0], s.t) == fill(WrenchStamped(), log.wrench(s, 0, ns))
+    assert conv.clock(s.t) == fill(Clock(), log.clock(ns))
+    assert conv.markers(s) == fill(MarkerArray(), log.markers(s, ns))
+    assert conv.wrench_topic("pin") == "~" + log.Topics().wrench("pin")[len(NODE):]
+
+
+# ---------------------------------------------------------------- rates and stamps
+def test_fast_mode_publishes_at_the_configured_rates_with_sim_time_stamps(harness):
+    h = harness(rate_hz=500.0, publish_rate_hz=100.0, forces_rate_hz=50.0, realtime=False,
+                duration=1.0, publish_clock=False)  # /clock: see the realtime test
+    h.start()
+    assert h.join() == 0
+    wait_for(lambda: len(h.messages("/joint_states")) >= 101, 10.0, "joint states")
+    wait_for(lambda: len(h.messages(f"{NODE}/closures/tip_pin/wrench")) >= 51, 10.0, "wrenches")
+    js = h.messages("/joint_states")
+    assert stamps_ns(js) == [k * 10_000_000 for k in range(101)]  # exactly every 10 ms
+    assert js[0].name == ["crank_joint", "coupler_joint", "rocker_joint"]
+    wrenches = h.messages(f"{NODE}/closures/tip_pin/wrench")
+    assert stamps_ns(wrenches) == [k * 20_000_000 for k in range(51)]
+    assert {w.header.frame_id for w in wrenches} == {"world"}
+    forces = h.messages(f"{NODE}/constraint_forces")
+    assert [(d.label, d.size, d.stride) for d in forces[-1].layout.dim] == [("tip_pin", 3, 3)]
+    last = wrenches[-1].wrench
+    assert list(forces[-1].data) == [last.force.x, last.force.y, last.torque.z]
+    energy = h.messages(f"{NODE}/energy")[-1]
+    assert [d.label for d in energy.layout.dim] == ["kinetic", "potential", "constraint", "total"]
+    assert energy.data[3] == pytest.approx(sum(energy.data[:3]), abs=1e-9)
+    assert not h.messages("/clock")
+
+
+def test_realtime_mode_follows_the_wall_clock(harness):
+    h = harness(rate_hz=200.0, realtime=True, duration=1.5)
+    h.start()
+    assert h.join() == 0
+    wait_for(lambda: len(h.messages("/joint_states")) >= 301, 10.0, "joint states")
+    with h.lock:
+        arrivals = [t for _, t in h.got["/joint_states"]]
+    assert stamps_ns(h.messages("/joint_states")) == [k * 5_000_000 for k in range(301)]
+    assert 1.2 < arrivals[-1] - arrivals[0] < 2.4  # 1.5 simulated seconds took about as long
+    wait_for(lambda: len(h.messages("/clock")) >= 301, 5.0, "/clock")
+    assert [nanoseconds(m.clock) for m in h.messages("/clock")] == [k * 5_000_000 for k in range(301)]
+    wait_for(lambda: h.messages("/diagnostics"), 5.0, "diagnostics")
+    status = h.messages("/diagnostics")[0].status[0]
+    assert status.name == "vjm_sim_node: simulation" and status.hardware_id == "four_bar"
+    values = {kv.key: kv.value for kv in status.values}
+    for key in ("realtime_factor", "late_ticks", "missed_ticks", "max_closure_error",
+                "sigma_min", "energy_balance_residual", "lockstep_timeouts"):
+        assert key in values
+    assert 0.5 < float(values["realtime_factor"]) < 1.5
+    assert float(values["max_closure_error"]) < 1e-3  # four-bar penalty closure, m
+    markers = h.messages(f"{NODE}/markers")
+    assert markers and {m.ns for m in markers[-1].markers} == {
+        "links", "joints", "constraint_forces", "tip_trace"}
+
+
+# ---------------------------------------------------------------- trajectories
+def test_lockstep_constant_effort_matches_the_plain_simulator(harness):
+    h = harness(rate_hz=1000.0, lockstep=True, lockstep_timeout=10.0, command_timeout=0.0,
+                realtime=False, duration=0.3)
+    h.on_joint_state(lambda msg: h.efforts.publish(Float64MultiArray(data=[3.0])))
+    h.start()
+    h.efforts.publish(Float64MultiArray(data=[3.0]))  # the answer to t = 0
+    assert h.join() == 0
+    assert h.node.loop.lockstep_timeouts == 0
+    wait_for(lambda: len(h.messages("/joint_states")) >= 301, 10.0, "joint states")
+    js = h.messages("/joint_states")[:301]
+    ref = plain_simulator("four_bar")
+    q, qd = [ref.q.copy()], [ref.qd.copy()]
+    for _ in range(300):
+        ref.advance([3.0])
+        q.append(ref.q.copy())
+        qd.append(ref.qd.copy())
+    assert stamps_ns(js) == [k * 1_000_000 for k in range(301)]
+    assert np.max(np.abs(np.array([m.position for m in js]) - q)) <= 1e-9
+    assert np.max(np.abs(np.array([m.velocity for m in js]) - qd)) <= 1e-9
+    assert [m.effort[0] for m in js[1:]] == [3.0] * 300
+
+
+def test_fast_mode_named_command_matches_the_plain_simulator(harness):
+    h = harness(scene="five_bar", rate_hz=1000.0, realtime=False, command_timeout=0.0,
+                duration=0.2, start_paused=True)
+    h.start()
+    h.named.publish(JointState(name=["right_base", "left_base"], effort=[-1.0, 2.0]))
+    wait_for(lambda: h.node.loop.commands.accepted == 1, 10.0, "the command")
+    assert h.call(SetBool, f"{NODE}/pause", SetBool.Request(data=False)).success
+    assert h.join() == 0
+    wait_for(lambda: nanoseconds(h.messages("/joint_states")[-1].header.stamp) == 200_000_000,
+             10.0, "the last joint state")
+    js = h.messages("/joint_states")
+    assert len(js) >= 190  # fast mode outruns a slow subscriber at times: compare what came
+    ref = plain_simulator("five_bar")
+    q = {0: ref.q.copy()}
+    for k in range(1, 201):
+        ref.advance([2.0, -1.0])
+        q[k * 1_000_000] = ref.q.copy()
+    assert max(np.max(np.abs(np.array(m.position) - q[nanoseconds(m.header.stamp)])) for m in js) <= 1e-9
+    assert list(js[-1].effort) == [2.0, 0.0, -1.0, 0.0]  # applied efforts, passive joints zero
+
+
+# ---------------------------------------------------------------- commands
+def log_lines(h, level=Log.WARN):
+    return [m.msg for m in list(h.logs) if m.level == level]
+
+
+def test_command_times_out_to_zero_with_one_warning(harness):
+    h = harness(rate_hz=200.0, realtime=True, command_timeout=0.3, duration=1.5)
+    h.start()
+    wait_for(lambda: len(h.messages("/joint_states")) > 10, 10.0, "joint states")
+    h.efforts.publish(Float64MultiArray(data=[5.0]))
+    assert h.join() == 0
+    wait_for(lambda: any("no valid command" in s for s in log_lines(h)), 10.0, "the warning")
+    js = h.messages("/joint_states")
+    effort = np.array([m.effort[0] for m in js])
+    t = np.array(stamps_ns(js)) * 1e-9
+    held = np.flatnonzero(effort == 5.0)
+    assert held.size and np.all(effort[held[0]: held[-1] + 1] == 5.0)
+    assert 0.2 <= t[held[-1]] - t[held[0]] <= 0.6  # held for about command_timeout (realtime)
+    assert np.all(effort[held[-1] + 1:] == 0.0) and held[-1] + 1 < len(js)
+    assert h.node.loop.commands.timeouts == 1
+    assert sum("no valid command for 0.3 s" in s for s in log_lines(h)) == 1
+
+
+BAD_COMMANDS = [
+    ("array", [1.0, 2.0], "expected 1 value"),
+    ("array", [math.nan], "non-finite effort (crank_joint = nan)"),
+    ("array", [math.inf], "non-finite effort (crank_joint = inf)"),
+    ("named", (["nose"], [1.0]), "unknown joint 'nose'"),
+    ("named", (["coupler_joint"], [1.0]), "'coupler_joint' has no actuator"),
+    ("named", (["crank_joint", "crank_joint"], [1.0, 1.0]), "more than once"),
+    ("named", (["crank_joint"], [1.0, 2.0]), "'name' has 1 entries but 'effort' has 2"),
+    ("named", (["crank_joint"], []), "expected joint names with efforts"),
+]
+
+
+def test_bad_commands_are_refused_with_throttled_reasons_and_limits_clamp(harness):
+    h = harness(start_paused=True, command_timeout=0.0)
+    h.start()
+    h.efforts.publish(Float64MultiArray(data=[3.0]))
+    wait_for(lambda: h.node.loop.commands.accepted == 1, 10.0, "the valid command")
+    for n, (topic, payload, _) in enumerate(BAD_COMMANDS, start=1):
+        if topic == "array":
+            h.efforts.publish(Float64MultiArray(data=payload))
+        else:
+            h.named.publish(JointState(name=payload[0], effort=payload[1]))
+        wait_for(lambda n=n: h.node.loop.commands.rejected == n, 10.0, f"refusal {n}")
+    expected = [w for _, _, w in BAD_COMMANDS]
+    wait_for(lambda: all(any(w in s for s in log_lines(h)) for w in expected if "inf" not in w),
+             10.0, "the warnings")
+    warnings = log_lines(h)
+    assert all(s.startswith(("~/effort_commands: command refused:",
+                             "~/joint_commands: command refused:")) for s in warnings)
+    # The nan and inf commands are one class: the second is held back within a second.
+    assert sum("non-finite" in s for s in warnings) == 1
+    assert h.node.loop.commands.efforts.tolist() == [3.0]  # nothing refused took effect
+    h.efforts.publish(Float64MultiArray(data=[150.0]))
+    wait_for(lambda: h.node.loop.commands.accepted == 2, 10.0, "the clamped command")
+    assert h.node.loop.commands.efforts.tolist() == [100.0]
+    wait_for(lambda: any("150 clamped to 100 (limit 100)" in s for s in log_lines(h)), 10.0,
+             "the clamp warning")
+
+
+# ---------------------------------------------------------------- services
+def test_pause_step_reset_services(harness):
+    h = harness(rate_hz=100.0, realtime=True)
+    h.start()
+    wait_for(lambda: len(h.messages("/joint_states")) > 5, 10.0, "joint states")
+    res = h.call(SetBool, f"{NODE}/pause", SetBool.Request(data=True))
+    assert res.success and res.message.startswith("paused at t = ")
+    time.sleep(0.1)
+    count = len(h.messages("/joint_states"))
+    time.sleep(0.3)
+    assert len(h.messages("/joint_states")) == count  # nothing while paused
+    t_last = nanoseconds(h.messages("/joint_states")[-1].header.stamp)
+    res = h.call(Trigger, f"{NODE}/step", Trigger.Request())
+    assert res.success and res.message == f"stepped to t = {(t_last + 10_000_000) * 1e-9:.6g} s"
+    wait_for(lambda: len(h.messages("/joint_states")) == count + 1, 10.0, "the stepped state")
+    assert nanoseconds(h.messages("/joint_states")[-1].header.stamp) == t_last + 10_000_000
+    res = h.call(Trigger, f"{NODE}/reset", Trigger.Request())
+    assert res.success and "reset to the initial state" in res.message
+    wait_for(lambda: len(h.messages("/joint_states")) == count + 2, 10.0, "the reset state")
+    first, latest = h.messages("/joint_states")[0], h.messages("/joint_states")[-1]
+    assert nanoseconds(latest.header.stamp) == 0 and list(latest.position) == list(first.position)
+    assert h.call(SetBool, f"{NODE}/pause", SetBool.Request(data=False)).success
+    wait_for(lambda: len(h.messages("/joint_states")) > count + 5, 10.0, "running again")
+    assert stamps_ns(h.messages("/joint_states")[count + 1: count + 4]) == [0, 10_000_000, 20_000_000]
+    res = h.call(Trigger, f"{NODE}/step", Trigger.Request())
+    assert not res.success and "not paused" in res.message
+    events = [m.data.split(":")[0] for m in h.messages(f"{NODE}/events")]
+    assert events[:4] == ["paused", "stepped", "reset", "resumed"]
+
+
+def test_parameters_are_validated_at_run_time(harness):
+    h = harness(start_paused=True)
+    h.start()
+
+    def set_param(name, value):
+        request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+        return h.call(SetParameters, f"{NODE}/set_parameters", request).results[0]
+
+    refused = [
+        ("rate_hz", -5.0, "rate_hz"),
+        ("integrator", "rk5", "integrator: expected one of"),
+        ("kp", 1e9, "omega_n"),
+        ("publish_rate_hz", 5000.0, "publish_rate_hz: expected at most the tick rate 1000"),
+        ("realtime", "yes", "Wrong parameter type"),  # refused by rclpy itself
+        ("scene", "no_such_scene", "no such scene"),
+        ("mcap", "/tmp/x.mcap", "read-only"),
+    ]
+    for name, value, words in refused:
+        result = set_param(name, value)
+        assert not result.successful and words in result.reason, (name, result.reason)
+    assert h.node.loop.sim.dt == 0.001
+    assert set_param("command_timeout", 2.0).successful
+    assert h.node.loop.commands.timeout == 2.0
+    assert set_param("rate_hz", 500).successful  # an integer is accepted for a float
+    assert h.node.loop.sim.dt == 0.001  # applies at the next reset
+    assert h.call(Trigger, f"{NODE}/reset", Trigger.Request()).success
+    assert h.node.loop.sim.dt == 0.002
+    assert h.call(Trigger, f"{NODE}/step", Trigger.Request()).message == "stepped to t = 0.002 s"
+    assert set_param("scene", "five_bar").successful  # another mechanism at the next reset
+    assert h.call(Trigger, f"{NODE}/reset", Trigger.Request()).success
+    wait_for(lambda: h.messages("/joint_states")[-1].name[0] == "left_base", 10.0, "five_bar")
+    assert h.node.loop.commands.actuator_names == ["left_base", "right_base"]
+    assert f"{NODE}/closures/pin/wrench" in {p.topic_name for p in h.node.publishers}
+
+
+# ---------------------------------------------------------------- the executable
+def test_config_file_lists_every_parameter_with_a_valid_value():
+    import yaml
+
+    from vjm_ros.ros.settings import PARAMETERS, NodeConfig
+
+    values = yaml.safe_load((ROOT / "config" / "sim_node.yaml").read_text())
+    values = values["vjm_sim_node"]["ros__parameters"]
+    assert list(values) == [p.name for p in PARAMETERS]
+    NodeConfig.from_values(values)
+
+
+def test_launch_file_compiles():
+    compile((ROOT / "launch" / "sim.launch.py").read_text(), "sim.launch.py", "exec")
+
+
+def node_process(*params, args=()):
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(DOMAIN),
+               PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args", *args]
+    for p in params:
+        cmd += ["-p", p]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+
+
+def finish(proc, timeout=60.0):
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return proc.returncode, out
+
+
+def orphaned_shm(before):
+    """Fast DDS shared-memory files created since ``before`` that no live process maps."""
+    now = set(glob.glob("/dev/shm/fastdds_*")) | set(glob.glob("/dev/shm/sem.fastdds_*"))
+    held = set()
+    for maps in glob.glob("/proc/[0-9]*/maps"):
+        try:
+            held.update(re.findall(r"/dev/shm/\S+", Path(maps).read_text()))
+        except OSError:
+            continue
+    return {f for f in now - before if f not in held and not f.startswith("/dev/shm/sem.")}
+
+
+def summary_of(output):
+    match = re.search(r"summary (\{.*\})", output)
+    assert match, output
+    return json.loads(match.group(1))
+
+
+class Listener:
+    """A probe in its own context, for the subprocess tests."""
+
+    def __init__(self, topics):
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=DOMAIN, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("listener", context=self.ctx)
+        self.count = {t: 0 for t in topics}
+        for topic, kind in topics.items():
+            self.node.create_subscription(
+                kind, topic, lambda m, t=topic: self.count.__setitem__(t, self.count[t] + 1), DEEP)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.spinner = Spinner(self.executor).start()
+
+    def close(self):
+        self.spinner.stop()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+def test_executable_runs_five_bar_for_its_duration_while_another_process_listens():
+    listener = Listener({"/joint_states": JointState, f"{NODE}/closures/pin/wrench": WrenchStamped})
+    before = set(glob.glob("/dev/shm/fastdds_*"))
+    try:
+        code, out = finish(node_process("scene:=five_bar", "duration:=5.0"))
+        wait_for(lambda: listener.count[f"{NODE}/closures/pin/wrench"] > 0, 5.0,
+                 f"wrenches (received {listener.count}; node output:\n{out})")
+    finally:
+        listener.close()
+    assert code == 0, out
+    summary = summary_of(out)
+    assert summary["reason"] == "duration" and summary["ticks"] == 5000
+    assert listener.count["/joint_states"] > 500 and listener.count[f"{NODE}/closures/pin/wrench"] > 50
+    assert not orphaned_shm(before)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signals_stop_the_executable_cleanly(sig, tmp_path):
+    listener = Listener({"/joint_states": JointState})
+    before = set(glob.glob("/dev/shm/fastdds_*"))
+    mcap = tmp_path / "run.mcap"
+    proc = node_process("realtime:=true", f"mcap:={mcap}")
+    try:
+        wait_for(lambda: listener.count["/joint_states"] > 100, 30.0, "the node to run")
+        proc.send_signal(sig)
+        code, out = finish(proc, 20.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        listener.close()
+    assert code == 0, out
+    ticks = summary_of(out)["ticks"]
+    assert summary_of(out)["reason"] == "stopped"
+    assert not orphaned_shm(before)
+    from mcap.reader import make_reader
+
+    with mcap.open("rb") as f:  # finalized: the summary section is there
+        reader = make_reader(f)
+        stats = reader.get_summary().statistics
+        assert stats.channel_message_counts and stats.message_count > ticks
+
+
+@pytest.mark.parametrize(
+    "params, words",
+    [
+        (["integrator:=rk5"], "integrator: expected one of"),
+        (["kp:=1e9", "kv:=0.0"], "beyond the stability bound"),
+        (["scene:=/no/such.yaml"], "no such scene or file"),
+        (["substeps:=2.5"], "substeps"),
+    ],
+)
+def test_bad_configuration_exits_with_code_2(params, words):
+    code, out = finish(node_process(*params))
+    assert code == 2 and words in out, out
+
+
+def test_divergence_exits_with_code_3():
+    code, out = finish(node_process("kp:=10.0", "kv:=0.0", "realtime:=false"))
+    assert code == 3, out
+    assert "simulation diverged" in out and "tip_pin" in out
+
+
+def test_params_file_loads_and_logs_are_written(tmp_path):
+    mcap, rrd = tmp_path / "run.mcap", tmp_path / "run.rrd"
+    code, out = finish(node_process(
+        "duration:=0.2", "realtime:=false", f"mcap:={mcap}", f"rrd:={rrd}", "realtime_priority:=10",
+        args=("--params-file", str(ROOT / "config" / "sim_node.yaml"))))
+    assert code == 0, out
+    assert "tick loop at SCHED_FIFO priority 10" in out or "realtime_priority 10 not granted" in out
+    summary = summary_of(out)
+    assert summary["scene"] == "five_bar" and summary["ticks"] == 200
+    assert rrd.stat().st_size > 0
+    from mcap.reader import make_reader
+
+    with mcap.open("rb") as f:
+        reader = make_reader(f)
+        topics = {c.topic for c in reader.get_summary().channels.values()}
+        assert "/joint_states" in topics
+        assert sum(1 for _ in reader.iter_messages(topics=["/joint_states"])) == 201

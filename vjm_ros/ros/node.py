@@ -1,0 +1,480 @@
+"""``vjm_sim_node``: a scene simulated at a fixed rate, served over ROS 2.
+
+Run it::
+
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST vjm_sim_node --ros-args -p scene:=five_bar -p duration:=5.0
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.ros.node --ros-args --params-file config/sim_node.yaml
+
+Parameters: :data:`vjm_ros.ros.settings.PARAMETERS` (each declared with its description and range;
+``config/sim_node.yaml`` lists them all). Topics (``~`` is ``/vjm_sim_node``):
+
+==============================  ========================================  =========================
+topic                           type                                      when
+==============================  ========================================  =========================
+``/joint_states``               ``sensor_msgs/JointState``                every tick, or
+                                                                          ``publish_rate_hz``
+``~/constraint_forces``         ``std_msgs/Float64MultiArray``            every tick, or
+                                                                          ``forces_rate_hz``
+``~/closures/<name>/wrench``    ``geometry_msgs/WrenchStamped``           same
+``~/energy``                    ``std_msgs/Float64MultiArray``            same
+``/clock``                      ``rosgraph_msgs/Clock``                   every tick
+``~/markers``                   ``visualization_msgs/MarkerArray``        ``marker_rate_hz`` (wall)
+``/diagnostics``                ``diagnostic_msgs/DiagnosticArray``       1 Hz (wall)
+``~/events``                    ``std_msgs/String``                       pause, step, reset, timeouts
+``~/effort_commands`` (in)      ``std_msgs/Float64MultiArray``            one value per actuator
+``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
+==============================  ========================================  =========================
+
+Message layouts: :mod:`vjm_ros.ros.conversions`. Header stamps are simulated time; the node itself
+runs on the wall clock (it publishes ``/clock`` but does not use it). Services: ``~/pause``
+(``std_srvs/SetBool``), ``~/step`` (``std_srvs/Trigger``, one tick while paused), ``~/reset``
+(``std_srvs/Trigger``, back to the initial state; settings changed since take effect).
+
+Threads: the tick loop (:class:`~vjm_ros.ros.loop.TickLoop`) owns the main thread; a background
+thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the subscriptions and services.
+
+Exit codes:
+
+* 0: ``duration`` reached, or stopped by SIGINT or SIGTERM (logs finalized);
+* 1: unexpected error (traceback printed);
+* 2: bad configuration (parameter, scene, penalty gains the integrator cannot carry, log file);
+* 3: the simulation diverged (the message names the time, the closure and the likely cause).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import traceback
+
+import numpy as np
+import rclpy
+import rclpy.exceptions
+import rclpy.logging
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from ..errors import ConfigurationError, DivergenceError, VjmError
+from ..scene import Scene
+from ..simulator import Sample, Simulator
+from . import conversions as conv
+from .commands import CommandBuffer, Throttle, Verdict
+from .loop import LoopOptions, TickLoop
+from .monitor import ERROR, assess
+from .runtime import Spinner, StopOnSignals, raise_priority
+from .settings import (
+    PARAMETERS,
+    RESET,
+    START,
+    NodeConfig,
+    ParamSpec,
+    build_simulator,
+    check_rates,
+    ticks_between,
+)
+
+NODE_NAME = "vjm_sim_node"
+EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3
+WARNING_PERIOD = 1.0
+"""Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
+NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning"}
+
+
+def descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    """ROS parameter descriptor of a :class:`~vjm_ros.ros.settings.ParamSpec`.
+
+    Floating-point parameters also accept integers (``-p rate_hz:=500``).
+    """
+    when = {
+        "now": "takes effect at the next tick",
+        RESET: "takes effect at the next ~/reset",
+        START: "read-only after start",
+    }[spec.applies]
+    d = ParameterDescriptor(
+        name=spec.name,
+        description=spec.description,
+        read_only=spec.applies == START,
+        additional_constraints=when,
+    )
+    if isinstance(spec.default, bool):
+        d.type = ParameterType.PARAMETER_BOOL
+    elif isinstance(spec.default, int):
+        d.type = ParameterType.PARAMETER_INTEGER
+        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    elif isinstance(spec.default, float):
+        # Dynamic typing lets `-p duration:=5` (an integer) through; NodeConfig checks the type.
+        d.dynamic_typing = True
+        d.floating_point_range = [
+            FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+        ]
+    else:
+        d.type = ParameterType.PARAMETER_STRING
+        if spec.choices:
+            shown = ", ".join(repr(c) for c in spec.choices)
+            d.additional_constraints = f"one of {shown}; {when}"
+    return d
+
+
+def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: str) -> list:
+    """The MCAP and rerun recorders asked for by ``mcap`` and ``rrd``.
+
+    Raises
+    ------
+    ConfigurationError
+        A recorder is not available or its file cannot be opened.
+    """
+    settings = {**sim.describe(), "node": node_name, "realtime": config.realtime,
+                "lockstep": config.lockstep}
+    wanted = [("mcap", config.mcap, "McapRecorder"), ("rrd", config.rrd, "RerunRecorder")]
+    recorders: list = []
+    try:
+        for key, path, cls_name in wanted:
+            if not path:
+                continue
+            try:
+                from .. import recorders as module
+
+                cls = getattr(module, cls_name)
+            except (ImportError, AttributeError) as exc:
+                raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
+            try:
+                args = (path, scene.model, settings, scene.text) if key == "mcap" else (path, scene.model, settings)
+                recorders.append(cls(*args))
+            except OSError as exc:
+                raise ConfigurationError(f"{key}: cannot open {path!r} ({exc.strerror or exc})") from None
+    except ConfigurationError:
+        for rec in recorders:
+            rec.close()
+        raise
+    return recorders
+
+
+class SimNode(Node):
+    """The simulator node: parameters, publishers, subscriptions and services around a TickLoop.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+    parameter_overrides : list of rclpy.parameter.Parameter, optional
+        Values for the parameters of :data:`~vjm_ros.ros.settings.PARAMETERS`.
+    node_name : str
+    namespace : str, optional
+
+    Raises
+    ------
+    VjmError, ValueError, rclpy.exceptions.ParameterException
+        A parameter value, the scene or a log file cannot be used (nothing is left open).
+    """
+
+    def __init__(self, *, context=None, parameter_overrides=None, node_name: str = NODE_NAME,
+                 namespace: str | None = None):
+        super().__init__(node_name, context=context, namespace=namespace,
+                         parameter_overrides=parameter_overrides)
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
+        self.config = NodeConfig.from_values(
+            {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        )
+        self.scene, sim = build_simulator(self.config)
+        self._pending_scene: Scene | None = None
+        recorders = open_recorders(self.config, self.scene, sim, self.get_name())
+        self._throttle = Throttle(WARNING_PERIOD)
+        self._make_publishers()
+        self._wrench_pubs: dict[str, object] = {}
+        self._adopt(sim.model)
+        self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
+                             recorders, paused=self.config.start_paused)
+        self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts, 10)
+        self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands, 10)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self.create_service(Trigger, "~/step", self._on_step)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        s = sim.settings
+        self.get_logger().info(
+            f"scene {self.scene.name}: {s.rate:g} Hz, {s.substeps} substep(s), {s.integrator}, "
+            f"{s.closure} closure; {'lockstep' if self.config.lockstep else ('realtime' if self.config.realtime else 'fast')}"
+            f"{', paused' if self.config.start_paused else ''}; actuators "
+            f"{sim.model.actuator_names} on {self.get_fully_qualified_name()}/effort_commands"
+        )
+
+    # ------------------------------------------------------------------ set-up
+    def _make_publishers(self) -> None:
+        self._joint_pub = self.create_publisher(JointState, "/joint_states", 10)
+        self._forces_pub = self.create_publisher(Float64MultiArray, "~/constraint_forces", 10)
+        self._energy_pub = self.create_publisher(Float64MultiArray, "~/energy", 10)
+        self._clock_pub = self.create_publisher(Clock, "/clock", 10)
+        self._markers_pub = self.create_publisher(MarkerArray, "~/markers", 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._events_pub = self.create_publisher(String, "~/events", 100)
+        self._energy_layout = conv.labelled_layout(conv.ENERGY_LABELS, 1)
+
+    def _commands_for(self, sim: Simulator) -> CommandBuffer:
+        model = sim.model
+        return CommandBuffer(model.actuator_names, model.joint_names, sim.limits,
+                             self.config.command_timeout)
+
+    def _options(self, sim: Simulator) -> LoopOptions:
+        c = self.config
+        return LoopOptions(
+            realtime=c.realtime,
+            duration=c.duration,
+            publish_every=ticks_between(c.publish_rate_hz, sim.settings.rate),
+            forces_every=ticks_between(c.forces_rate_hz, sim.settings.rate),
+            publish_clock=c.publish_clock,
+            lockstep=c.lockstep,
+            lockstep_timeout=c.lockstep_timeout,
+            marker_period=1.0 / c.marker_rate_hz if c.marker_rate_hz > 0 else 0.0,
+        )
+
+    def _adopt(self, model) -> None:
+        """Names, layouts and one wrench publisher per closure for ``model``."""
+        self._joint_names = list(model.joint_names)
+        self._closure_names = list(model.closure_names)
+        self._forces_layout = conv.labelled_layout(self._closure_names, len(conv.FORCE_COMPONENTS))
+        for name in list(self._wrench_pubs):
+            if name not in self._closure_names:
+                self.destroy_publisher(self._wrench_pubs.pop(name))
+        for name in self._closure_names:
+            if name not in self._wrench_pubs:
+                self._wrench_pubs[name] = self.create_publisher(
+                    WrenchStamped, conv.wrench_topic(name), 10)
+        self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
+        self._trace = conv.TipTrace(len(model.chains))
+
+    # ------------------------------------------------------------------ outputs (loop thread)
+    def rebuilt(self, simulator: Simulator) -> None:
+        """Adopt the simulator built with settings changed since the last reset."""
+        if self._pending_scene is not None:
+            self.scene, self._pending_scene = self._pending_scene, None
+        self._adopt(simulator.model)
+        self.loop.options = self._options(simulator)
+
+    def clock(self, t: float) -> None:
+        """Publish ``/clock``."""
+        self._clock_pub.publish(conv.clock(t))
+
+    def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        """Publish ``/joint_states``."""
+        self._joint_pub.publish(conv.joint_state(self._joint_names, t, q, qd, effort))
+
+    def dynamics(self, sample: Sample) -> None:
+        """Publish the constraint forces, wrenches and energy of a sample."""
+        forces = sample.closure_force
+        self._forces_pub.publish(conv.constraint_forces(self._forces_layout, forces))
+        for pub, force in zip(self._wrench_list, forces, strict=True):
+            pub.publish(conv.wrench(force, sample.t))
+        self._energy_pub.publish(conv.energy(self._energy_layout, sample.energy))
+        self._trace.add(sample)
+
+    def markers(self, sample: Sample) -> None:
+        """Publish ``~/markers``."""
+        self._markers_pub.publish(conv.markers(sample, self._trace.strips()))
+
+    def diagnostics(self, report: dict, paused: bool, level: int | None = None,
+                    message: str | None = None) -> None:
+        """Publish ``/diagnostics``."""
+        if level is None:
+            level, message = assess(report, paused)
+        self._diag_pub.publish(conv.diagnostics(
+            report, level, message, report["sim_time"], f"{self.get_name()}: simulation",
+            self.scene.name))
+
+    def notice(self, kind: str, text: str) -> None:
+        """Log an event (warnings throttled per kind) and publish it on ``~/events``."""
+        self._events_pub.publish(String(data=f"{kind}: {text}"))
+        if NOTICE_LEVELS.get(kind) == "warning":
+            self._warn(kind, text)
+        else:
+            self.get_logger().info(text)
+
+    def _warn(self, key: str, text: str) -> None:
+        held = self._throttle(key)
+        if held is None:
+            return
+        suffix = f" ({held} more suppressed in the last {WARNING_PERIOD:g} s)" if held else ""
+        self.get_logger().warning(text + suffix)
+
+    # ------------------------------------------------------------------ inputs (executor thread)
+    def _on_efforts(self, msg: Float64MultiArray) -> None:
+        self._judge("~/effort_commands", self.loop.commands.submit_array(conv.efforts_of(msg)))
+
+    def _on_joint_commands(self, msg: JointState) -> None:
+        names, efforts = conv.named_efforts(msg)
+        self._judge("~/joint_commands", self.loop.commands.submit_named(names, efforts))
+
+    def _judge(self, topic: str, verdict: Verdict) -> None:
+        if not verdict.accepted:
+            self._warn(f"{topic} {verdict.kind}", f"{topic}: command refused: {verdict.reason}")
+        for text in verdict.clamped:
+            self._warn(f"{topic} clamped", f"{topic}: effort {text}")
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        self.loop.pause(request.data)
+        response.success = True
+        state = "paused" if request.data else "running"
+        response.message = f"{state} at t = {self.loop.sim.t:.6g} s"
+        return response
+
+    def _on_step(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if not self.loop.paused:
+            response.success = False
+            response.message = "not paused: ~/step runs one tick only while paused (call ~/pause first)"
+            return response
+        t = self.loop.step()
+        response.success = t is not None
+        response.message = f"stepped to t = {t:.6g} s" if t is not None else "the tick loop is not running"
+        return response
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        done = self.loop.reset()
+        response.success = done
+        response.message = (f"reset to the initial state of {self.scene.name} (t = 0)" if done
+                            else "the tick loop is not running")
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        try:
+            new = self.config.updated({p.name: p.value for p in params})
+            changed = new.changed(self.config)
+            if START in changed.values():
+                frozen = [k for k, v in changed.items() if v == START]
+                raise ConfigurationError(f"{', '.join(frozen)}: read-only after start")
+            pending = None
+            if RESET in changed.values():
+                if new.scene != self.config.scene and self.loop.recorders:
+                    raise ConfigurationError("scene: cannot change while recording (mcap/rrd)")
+                pending = build_simulator(new)
+            check_rates(new, self.loop.sim.settings.rate)
+        except (VjmError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.config = new
+        if pending is not None:
+            self._pending_scene, sim = pending
+            self.loop.replace_on_reset(sim, self._commands_for(sim))
+            self.get_logger().info(
+                f"{', '.join(k for k, v in changed.items() if v == RESET)}: "
+                "takes effect at the next ~/reset")
+        self.loop.commands.timeout = new.command_timeout
+        self.loop.options = self._options(self.loop.sim)
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ end
+    def close(self) -> None:
+        """Finalize the recorders (idempotent)."""
+        for rec in self.loop.recorders:
+            try:
+                rec.close()
+            except Exception as exc:  # a log that cannot be finalized must not hide the rest
+                self.get_logger().error(f"closing {type(rec).__name__}: {exc}")
+        self.loop.recorders = []
+
+    def summary(self, reason: str, wall: float, cpu: float) -> dict:
+        """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s."""
+        loop = self.loop
+        stats = loop.pacer.stats
+        return {
+            "scene": self.scene.name,
+            "reason": reason,
+            "sim_time": loop.sim.t,
+            "ticks": loop.sim.ticks,
+            "wall_time": wall,
+            "cpu_time": cpu,
+            "realtime_factor": loop.sim.t / wall if wall > 0 else None,
+            "realtime": loop.options.realtime,
+            "lockstep": loop.options.lockstep,
+            "late_ticks": stats.late,
+            "missed_ticks": stats.missed,
+            "resyncs": stats.resyncs,
+            "max_lateness": stats.max_lateness,
+            "lockstep_timeouts": loop.lockstep_timeouts,
+            "commands_accepted": loop.commands.accepted,
+            "commands_rejected": loop.commands.rejected,
+            "command_timeouts": loop.commands.timeouts,
+            "max_closure_error": loop.monitor.max_closure_error,
+        }
+
+    def fail(self, exc: DivergenceError) -> None:
+        """Report a divergence on the log, ``~/events`` and ``/diagnostics``."""
+        self.get_logger().error(str(exc))
+        self._events_pub.publish(String(data=f"diverged: {exc}"))
+        report = self.loop.report()
+        self.diagnostics(report, False, ERROR, str(exc))
+
+
+def run(node: SimNode) -> int:
+    """Spin ``node`` in a background thread and run its tick loop in this thread.
+
+    The executor thread starts first, so only the tick loop gets ``realtime_priority``.
+
+    Returns
+    -------
+    int
+        :data:`EXIT_OK` (duration reached or stopped) or :data:`EXIT_DIVERGED`.
+    """
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    spinner = Spinner(executor).start()
+    raise_priority(node.config.realtime_priority, node.get_logger())
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        reason = node.loop.run()
+        summary = node.summary(reason, time.perf_counter() - wall0, time.process_time() - cpu0)
+        node.get_logger().info(
+            f"stopped ({reason}) at t = {summary['sim_time']:.6g} s after {summary['ticks']} ticks; "
+            f"summary {json.dumps(summary)}")
+        return EXIT_OK
+    except DivergenceError as exc:
+        node.fail(exc)
+        return EXIT_DIVERGED
+    finally:
+        spinner.stop()
+        executor.remove_node(node)
+        executor.shutdown()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console entry point ``vjm_sim_node`` (see the module documentation for exit codes)."""
+    with StopOnSignals() as stop:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except Exception as exc:
+            print(f"{NODE_NAME}: cannot start ROS 2: {exc}", file=sys.stderr)
+            return EXIT_CONFIG
+        node = None
+        try:
+            try:
+                node = SimNode()
+            except (VjmError, ValueError, rclpy.exceptions.ParameterException) as exc:
+                rclpy.logging.get_logger(NODE_NAME).error(f"cannot start: {exc}")
+                return EXIT_CONFIG
+            stop.attach(node.loop)
+            return run(node)
+        except Exception:
+            traceback.print_exc()
+            return EXIT_ERROR
+        finally:
+            if node is not None:
+                node.close()
+                node.destroy_node()
+            rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,152 @@
+"""Tick pacing against the wall clock, without ROS.
+
+Realtime mode is a deadline loop: tick ``k`` is due at ``start + k * period`` (``next += period``),
+so a tick that starts late is followed by ticks that catch up instead of skipping simulated time.
+To be on time without burning a core, :meth:`Pacer.wait` sleeps until ``margin`` before the
+deadline (``time.sleep`` overshoots by ~0.08 ms here) and spins for the rest, yielding the GIL
+at every turn so that subscription callbacks are not held up.
+
+Counts (:class:`PacingStats`):
+
+* **late**: a tick that started more than ``late_tolerance`` after its deadline;
+* **missed**: a tick that started a whole period or more after its deadline, i.e. when the next
+  tick was already due (a subset of the late ticks). After a stall, every catch-up tick that is
+  still a period behind counts;
+* **resyncs**: the loop fell more than ``max_lag`` behind and gave up catching up; the schedule
+  restarts from the current time (simulated time then trails wall time for good).
+
+Fast mode (``realtime = False``) never waits: ticks run back to back and nothing is counted as late.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+SLEEP_SLICE = 0.05
+"""Longest single sleep, s, so that a stop request is seen within this time."""
+
+
+@dataclass
+class PacingStats:
+    """Counters of a pacer since it was created.
+
+    Attributes
+    ----------
+    ticks : int
+        Ticks released by :meth:`Pacer.wait`.
+    late, missed, resyncs : int
+        See the module documentation.
+    max_lateness : float
+        Largest start delay seen, s.
+    """
+
+    ticks: int = 0
+    late: int = 0
+    missed: int = 0
+    resyncs: int = 0
+    max_lateness: float = 0.0
+
+
+class Pacer:
+    """Releases ticks at a fixed wall-clock period (realtime) or at once (fast mode).
+
+    Parameters
+    ----------
+    period : float
+        Tick period, s.
+    realtime : bool
+        Pace to the wall clock; False runs flat out.
+    margin : float
+        Time before a deadline at which sleeping stops and spinning starts, s.
+    late_tolerance : float, optional
+        Start delay beyond which a tick counts as late, s; 10 % of the period by default.
+    max_lag : float
+        Largest backlog caught up, s; beyond it the schedule restarts (a resync).
+    clock : callable
+        Monotonic time, s.
+    sleep : callable
+        ``sleep(seconds)``.
+    spin : callable
+        Called while spinning to the deadline (``os.sched_yield``: releases the GIL).
+    """
+
+    def __init__(
+        self,
+        period: float,
+        realtime: bool = True,
+        *,
+        margin: float = 2e-4,
+        late_tolerance: float | None = None,
+        max_lag: float = 0.1,
+        clock: Callable[[], float] = time.perf_counter,
+        sleep: Callable[[float], None] = time.sleep,
+        spin: Callable[[], object] = os.sched_yield,
+    ):
+        if not period > 0:
+            raise ValueError(f"period: expected a positive number of seconds, found {period!r}")
+        self.period = float(period)
+        self.realtime = bool(realtime)
+        self.margin = float(margin)
+        self._tolerance = late_tolerance
+        self.max_lag = float(max_lag)
+        self._clock = clock
+        self._sleep = sleep
+        self._yield = spin
+        self._next: float | None = None
+        self.stats = PacingStats()
+
+    @property
+    def late_tolerance(self) -> float:
+        """Start delay beyond which a tick counts as late, s."""
+        return 0.1 * self.period if self._tolerance is None else float(self._tolerance)
+
+    def restart(self) -> None:
+        """Make the next tick due now (after a pause, a reset or a change of mode or period)."""
+        self._next = None
+
+    def wait(self, cancelled: Callable[[], bool] | None = None) -> float:
+        """Block until the next tick is due and account for it.
+
+        Parameters
+        ----------
+        cancelled : callable, optional
+            Checked between sleep slices; when it returns True the wait ends early and the tick
+            is not released (returns ``nan``).
+
+        Returns
+        -------
+        float
+            How late the tick starts, s (0 in fast mode, ``nan`` when cancelled).
+        """
+        if not self.realtime:
+            self.stats.ticks += 1
+            return 0.0
+        now = self._clock()
+        if self._next is None:
+            self._next = now
+        target = self._next
+        while target - now > self.margin:
+            if cancelled is not None and cancelled():
+                return float("nan")
+            self._sleep(min(target - now - self.margin, SLEEP_SLICE))
+            now = self._clock()
+        while now < target:
+            self._yield()  # lets the executor thread take the GIL while this one spins
+            now = self._clock()
+        lateness = now - target
+        s = self.stats
+        s.ticks += 1
+        if lateness > self.late_tolerance:
+            s.late += 1
+        if lateness >= self.period:
+            s.missed += 1
+        s.max_lateness = max(s.max_lateness, lateness)
+        if lateness > self.max_lag:
+            s.resyncs += 1
+            self._next = now + self.period
+        else:
+            self._next = target + self.period
+        return lateness
