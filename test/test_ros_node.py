@@ -491,7 +491,13 @@ def orphaned_shm(before):
             held.update(re.findall(r"/dev/shm/\S+", Path(maps).read_text()))
         except OSError:
             continue
-    return {f for f in now - before if f not in held and not f.startswith("/dev/shm/sem.")}
+    # Lock files (``*_el``, ``*_sl``) are never mapped, and may belong to other live participants
+    # on this machine; a leaked participant also leaves its (mappable) data segment, checked here.
+    return {
+        f
+        for f in now - before
+        if f not in held and not f.startswith("/dev/shm/sem.") and not f.endswith(("_el", "_sl"))
+    }
 
 
 def summary_of(output):
