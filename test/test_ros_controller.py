@@ -11,7 +11,6 @@ import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -21,7 +20,6 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from vjm_ros.constraints import ExactClosure  # noqa: E402
 from vjm_ros.ros.controller import FiveBarGeometry, make_law, tip_position  # noqa: E402
@@ -116,8 +114,10 @@ def reap(proc, sig=None, timeout=30.0):
 
 @pytest.mark.ros
 def test_pin_tracks_the_circle_with_the_example_controller():
-    sim = spawn("vjm_ros.ros.node", "scene:=five_bar", "lockstep:=true", "lockstep_timeout:=2.0",
-                "realtime:=false", "duration:=3.0", "start_paused:=true", "command_timeout:=0.0")
+    # A generous lockstep timeout: on a fresh checkout the controller's first answer waits for
+    # the physics kernel to compile (~10 s on this machine); a timeout then is not a lost tick.
+    sim = spawn("vjm_ros.ros.node", "scene:=five_bar", "lockstep:=true", "lockstep_timeout:=30.0",
+                "realtime:=false", "duration:=3.0", "wait_for_command:=true", "command_timeout:=0.0")
     ctl = spawn("vjm_ros.ros.controller")
     ctx = rclpy.Context()
     rclpy.init(context=ctx, domain_id=DOMAIN, signal_handler_options=SignalHandlerOptions.NO)
@@ -134,20 +134,6 @@ def test_pin_tracks_the_circle_with_the_example_controller():
     executor.add_node(probe)
     spinner = Spinner(executor).start()
     try:
-        end = time.monotonic() + 30.0
-        while not (probe.count_subscribers("/joint_states") >= 2
-                   and probe.count_publishers("/vjm_sim_node/effort_commands") >= 1):
-            assert time.monotonic() < end and sim.poll() is None and ctl.poll() is None
-            time.sleep(0.05)
-        time.sleep(0.5)  # let the endpoints match
-        for kind, name, request in ((Trigger, "reset", Trigger.Request()),
-                                    (SetBool, "pause", SetBool.Request(data=False))):
-            client = probe.create_client(kind, f"/vjm_sim_node/{name}")
-            assert client.wait_for_service(timeout_sec=10.0)
-            future = client.call_async(request)
-            while not future.done():
-                time.sleep(0.01)
-            assert future.result().success
         code, out = reap(sim, timeout=120.0)
         assert code == 0, out
         assert '"lockstep_timeouts": 0' in out, out  # the controller answered every tick
@@ -162,14 +148,14 @@ def test_pin_tracks_the_circle_with_the_example_controller():
     with lock:
         t = np.array([s[0] for s in states])
         q = np.array([s[1] for s in states])
-    t, first = np.unique(t, return_index=True)  # the state at t = 0 comes more than once
+    t, first = np.unique(t, return_index=True)  # the state at t = 0 may come more than once
     q = q[first]
-    assert t[-1] == pytest.approx(3.0) and len(t) == 3001
+    late = t >= 2.0 - 1e-9
+    assert t[-1] == pytest.approx(3.0) and late.sum() == 1001  # every state of the last second
     tips = np.array([tip_position(MODEL, qi) for qi in q])
-    late = t >= 2.0
     radial = np.abs(np.linalg.norm(tips[late] - CENTER, axis=1) - RADIUS)
     assert radial.max() < TRACKING_TOLERANCE
-    law = make_law(MODEL, q[0])
+    law = make_law(MODEL, MODEL.initial_state()[0])  # the controller started at t = 0
     desired = np.array([law.trajectory.tip(ti) for ti in t[late]])
     assert np.linalg.norm(tips[late] - desired, axis=1).max() < 2 * TRACKING_TOLERANCE
     swept = np.unwrap(np.arctan2(*(tips[late] - CENTER).T[::-1]))
