@@ -13,3 +13,20 @@ os.environ.setdefault(
     "ROS_LOG_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "vjm_ros_test_logs")
 )
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def four_bar_samples(ticks):
+    """Run the built-in four-bar with exact closure for ``ticks`` ticks.
+
+    Returns ``(scene, simulator, samples)``, one sample per tick; shared by the log tests.
+    """
+    from vjm_ros.scene import load_scene
+    from vjm_ros.simulator import SimulationSettings, Simulator
+
+    scene = load_scene("four_bar")
+    sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)
+    samples = []
+    for _ in range(ticks):
+        sim.advance()
+        samples.append(sim.sample())
+    return scene, sim, samples

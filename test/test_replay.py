@@ -12,13 +12,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from conftest import four_bar_samples
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
 from vjm_ros.recorders.mcap_recorder import McapRecorder
 from vjm_ros.replay import read_info, recover, replay
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
 
 REPO = Path(__file__).resolve().parents[1]
 RERUN = Path(sys.executable).with_name("rerun")
@@ -27,13 +26,7 @@ TICKS = 400
 
 @pytest.fixture(scope="module")
 def run():
-    scene = load_scene("four_bar")
-    sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)
-    samples = []
-    for _ in range(TICKS):
-        sim.advance()
-        samples.append(sim.sample())
-    return scene, sim, samples
+    return four_bar_samples(TICKS)
 
 
 @pytest.fixture(scope="module")

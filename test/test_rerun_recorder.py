@@ -11,11 +11,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from conftest import four_bar_samples
 from rerun.chunk import RrdReader
 
 from vjm_ros.recorders.rerun_recorder import RerunRecorder, force_components
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
 
 RERUN = Path(sys.executable).with_name("rerun")
 TICKS = 400
@@ -23,13 +22,7 @@ TICKS = 400
 
 @pytest.fixture(scope="module")
 def run():
-    scene = load_scene("four_bar")
-    sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)
-    samples = []
-    for _ in range(TICKS):
-        sim.advance()
-        samples.append(sim.sample())
-    return scene, sim, samples
+    return four_bar_samples(TICKS)
 
 
 def columns(path: Path, entity: str, component: str, timeline: str = "sim_time"):

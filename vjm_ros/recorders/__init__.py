@@ -87,6 +87,37 @@ def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[
             signal.signal(s, handler)
 
 
+class Recorder:
+    """Shared life cycle of the recorders: idempotent :meth:`close` and context management.
+
+    Subclasses set ``self._closed = False`` when opened and implement :meth:`_finalize`.
+    """
+
+    _closed: bool = True
+
+    def _finalize(self) -> None:
+        """Write what is pending and release the sink (called once by :meth:`close`)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Finalize the log; later calls do nothing."""
+        if self._closed:
+            return
+        self._closed = True
+        self._finalize()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
+        return self._closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+
 class Timebase:
     """Monotonic recording time (ns) from the simulator's time, which restarts at each reset.
 

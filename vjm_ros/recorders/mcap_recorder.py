@@ -29,7 +29,7 @@ from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from ..model import Model
-from . import Timebase, cdr, messages, msgdefs, package_versions, tick_of
+from . import Recorder, Timebase, cdr, messages, msgdefs, package_versions, tick_of
 
 SCENE_ATTACHMENT = "scene.yaml"
 SCENE_MEDIA_TYPE = "application/yaml"
@@ -51,7 +51,7 @@ def _metadata_values(data: dict) -> dict[str, str]:
     }
 
 
-class McapRecorder:
+class McapRecorder(Recorder):
     """Write simulation samples to an MCAP file, as the ROS 2 node would publish them.
 
     Parameters
@@ -266,24 +266,10 @@ class McapRecorder:
         self._chunk_wall = time.monotonic()
 
     # ------------------------------------------------------------------ closing
-    def close(self) -> None:
-        """Write the summary (Statistics, indexes) and close the file; later calls do nothing."""
-        if self._closed:
-            return
-        self._closed = True
+    def _finalize(self) -> None:
+        """Write the summary (Statistics, indexes) and close the file."""
         try:
             self._writer.finish()
             self.flushed_count = self.message_count
         finally:
             self._file.close()
-
-    @property
-    def closed(self) -> bool:
-        """Whether :meth:`close` has run."""
-        return self._closed
-
-    def __enter__(self) -> McapRecorder:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self.close()

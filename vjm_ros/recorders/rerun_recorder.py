@@ -44,7 +44,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..model import ANGLE, GROUND, Model
-from . import Timebase, messages, package_versions, tick_of
+from . import Recorder, Timebase, messages, package_versions, tick_of
 
 TIMELINE = "sim_time"
 ROOT = "mechanism"
@@ -113,7 +113,7 @@ def default_blueprint(model: Model) -> rrb.Blueprint:
     )
 
 
-class RerunRecorder:
+class RerunRecorder(Recorder):
     """Log simulation samples to rerun.
 
     Parameters
@@ -385,24 +385,10 @@ class RerunRecorder:
         self.rec.log("events", rr.TextLog("reset", level="INFO"))
 
     # ------------------------------------------------------------------ closing
-    def close(self) -> None:
-        """Send what is buffered, flush and close the sink; later calls do nothing."""
-        if self._closed:
-            return
-        self._closed = True
+    def _finalize(self) -> None:
+        """Send what is buffered, flush and close the sink."""
         try:
             self.send()
             self.rec.flush()
         finally:
             self.rec.disconnect()
-
-    @property
-    def closed(self) -> bool:
-        """Whether :meth:`close` has run."""
-        return self._closed
-
-    def __enter__(self) -> RerunRecorder:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self.close()
