@@ -46,6 +46,9 @@ def generate_launch_description():
                     "scene": scene,
                     "rate_hz": ParameterValue(LaunchConfiguration("rate_hz"), value_type=float),
                     "lockstep": ParameterValue(LaunchConfiguration("lockstep"), value_type=bool),
+                    # With the controller, hold the start pose until its first command arrives.
+                    "wait_for_command": ParameterValue(LaunchConfiguration("controller"),
+                                                       value_type=bool),
                 },
             ],
         ),

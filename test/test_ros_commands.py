@@ -6,6 +6,7 @@ the ROS outputs, and fake clocks where time matters.
 
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -504,6 +505,25 @@ class FakeRecorder:
 
     def note_reset(self, t):
         self.resets.append(t)
+
+
+def test_wait_for_command_holds_the_initial_state_until_a_command_arrives():
+    out = Collect()
+    loop = make_loop(out, duration=0.01, wait_for_command=True)
+    result = []
+    thread = threading.Thread(target=lambda: result.append(loop.run()))
+    thread.start()
+    try:
+        time.sleep(0.35)
+        assert loop.sim.ticks == 0 and len(out.times) >= 3  # republished while holding
+        assert set(out.times) == {0.0}
+        loop.commands.submit_array([2.0])
+        thread.join(10.0)
+    finally:
+        loop.stop()
+        thread.join(10.0)
+    assert result == [DURATION] and loop.sim.ticks == 10
+    assert out.effort[-1][0] == 2.0 and ("started" in [k for k, _ in out.notices])
 
 
 def test_pause_step_reset_and_stop_from_another_thread():

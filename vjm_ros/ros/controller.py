@@ -8,8 +8,13 @@ talking to the simulator only through topics, as a controller on real hardware w
 
 Run it next to the simulator (or use ``launch/sim.launch.py``)::
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST vjm_sim_node --ros-args -p scene:=five_bar &
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST vjm_sim_node --ros-args -p scene:=five_bar \
+        -p wait_for_command:=true &
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST vjm_pd_controller
+
+``wait_for_command`` keeps the five-bar in its start pose until the controller's first command
+arrives: from that pose (both chains stretched, an unstable equilibrium) the mechanism falls
+within a second, and discovery between two freshly started processes can take that long.
 
 The control law is joint-space PD with gravity compensation on the actuated joints,
 

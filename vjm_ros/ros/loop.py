@@ -14,8 +14,12 @@ One tick (:meth:`TickLoop.run`):
    diagnostics at their wall-clock periods.
 
 The state at ``t = 0`` is published before the first tick (a lockstep controller answers it with
-the first command); in lockstep mode, resuming from a pause publishes the joint state again. Pause, step, reset and stop are requests from other threads (the service
-callbacks), served between ticks, so the simulator is only ever touched by the loop's thread.
+the first command); in lockstep mode, resuming from a pause publishes the joint state again. With
+``wait_for_command`` the loop holds the initial state until the first command arrives, so that a
+controller whose discovery takes a while finds the mechanism where the scene put it.
+
+Pause, step, reset and stop are requests from other threads (the service callbacks), served
+between ticks, so the simulator is only ever touched by the loop's thread.
 """
 
 from __future__ import annotations
@@ -36,6 +40,8 @@ from .pacing import Pacer
 
 WAIT_SLICE = 0.05
 """Longest uninterrupted wait of the loop, s (how soon it sees a request or a stop)."""
+HOLD_REPUBLISH = 0.1
+"""Period of the joint state republished while waiting for the first command, wall s."""
 
 DURATION = "duration"
 STOPPED = "stopped"
@@ -61,7 +67,7 @@ class Outputs(Protocol):
 
     def notice(self, kind: str, text: str) -> None:
         """An event: ``command_timeout``, ``lockstep_timeout``, ``paused``, ``resumed``,
-        ``stepped``, ``reset``."""
+        ``stepped``, ``reset``, ``started``."""
 
     def rebuilt(self, simulator: Simulator) -> None:
         """The simulator was replaced (new settings applied at a reset)."""
@@ -99,6 +105,9 @@ class LoopOptions:
         Wall seconds between marker outputs; 0: none.
     diagnostics_period : float
         Wall seconds between diagnostics.
+    wait_for_command : bool
+        Hold the initial state (after start and after each reset) until a command arrives,
+        republishing the joint state every :data:`HOLD_REPUBLISH` seconds meanwhile.
     """
 
     realtime: bool = True
@@ -110,6 +119,7 @@ class LoopOptions:
     lockstep_timeout: float = 1.0
     marker_period: float = 1.0 / 30.0
     diagnostics_period: float = 1.0
+    wait_for_command: bool = False
 
 
 class TickLoop:
@@ -162,6 +172,7 @@ class TickLoop:
         self._next_markers = 0.0
         self._next_diagnostics = 0.0
         self._realtime = self.options.realtime
+        self._holding = False
 
     # ------------------------------------------------------------------ requests (any thread)
     def stop(self) -> None:
@@ -235,11 +246,15 @@ class TickLoop:
         """
         try:
             self._emit(self.sim.sample(singular_values=True))
+            self._holding = self.options.wait_for_command
             self._next_diagnostics = self._clock() + self.options.diagnostics_period
             while not self._stop:
                 self._serve_requests()
                 if self._paused:
                     self._idle()
+                    continue
+                if self._holding:
+                    self._hold()
                     continue
                 if self._duration_reached():
                     return DURATION
@@ -251,6 +266,17 @@ class TickLoop:
         finally:
             with self._cv:
                 self._cv.notify_all()
+
+    def _hold(self) -> None:
+        """Keep the initial state until a command arrives, republishing it for late joiners."""
+        if self.commands.wait_fresh(HOLD_REPUBLISH):
+            self._holding = False
+            self.pacer.restart()
+            self.outputs.notice("started", f"first command: running from t = {self.sim.t:.6g} s")
+            return
+        sim = self.sim
+        self.outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+        self._periodic()
 
     def _duration_reached(self) -> bool:
         d = self.options.duration
@@ -386,6 +412,7 @@ class TickLoop:
         self.pacer.restart()
         self.outputs.notice("reset", f"reset at t = {t_before:.6g} s to the initial state")
         self._emit(self.sim.sample(singular_values=True))
+        self._holding = self.options.wait_for_command
         with self._cv:
             self._resets_done = self._resets_asked
             self._cv.notify_all()

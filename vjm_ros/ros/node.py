@@ -30,6 +30,10 @@ runs on the wall clock (it publishes ``/clock`` but does not use it). Services: 
 (``std_srvs/SetBool``), ``~/step`` (``std_srvs/Trigger``, one tick while paused), ``~/reset``
 (``std_srvs/Trigger``, back to the initial state; settings changed since take effect).
 
+A controller that starts with the simulator should be paired with ``-p wait_for_command:=true``
+(the initial state is held, and republished, until its first command arrives) or with
+``lockstep`` (every tick waits for its command).
+
 Threads: the tick loop (:class:`~vjm_ros.ros.loop.TickLoop`) owns the main thread; a background
 thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the subscriptions and services.
 
@@ -241,6 +245,7 @@ class SimNode(Node):
             lockstep=c.lockstep,
             lockstep_timeout=c.lockstep_timeout,
             marker_period=1.0 / c.marker_rate_hz if c.marker_rate_hz > 0 else 0.0,
+            wait_for_command=c.wait_for_command,
         )
 
     def _adopt(self, model) -> None:

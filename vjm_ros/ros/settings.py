@@ -112,6 +112,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "with the command in force (counted in /diagnostics).", 1e-3, 3600.0),
     ParamSpec("marker_rate_hz", 30.0,
               "Wall-clock rate of ~/markers, Hz; 0: no markers.", 0.0, 1000.0),
+    ParamSpec("wait_for_command", False,
+              "Hold the initial state (at start and after ~/reset) until the first valid "
+              "command arrives, republishing /joint_states every 0.1 s meanwhile: a controller "
+              "that connects late finds the mechanism where the scene put it."),
     ParamSpec("realtime_priority", 0,
               "SCHED_FIFO priority (1-99) of the tick loop's thread on Linux, for fewer missed "
               "ticks on a busy machine (needs root, CAP_SYS_NICE or an rtprio limit; refused "
@@ -147,6 +151,7 @@ class NodeConfig:
     lockstep: bool = False
     lockstep_timeout: float = 1.0
     marker_rate_hz: float = 30.0
+    wait_for_command: bool = False
     realtime_priority: int = 0
     start_paused: bool = False
 
