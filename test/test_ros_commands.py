@@ -10,6 +10,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vjm_ros.errors import ConfigurationError, DivergenceError, SceneError, StiffnessError
 from vjm_ros.ros import commands as cmd
@@ -106,6 +108,56 @@ def test_bad_named_command_is_refused_with_reason(names, efforts, kind, words):
     for w in words:
         assert w in v.reason, v.reason
     np.testing.assert_array_equal(b.latch().efforts, [3.0, 4.0])
+
+
+def test_a_flood_of_junk_names_is_refused_in_linear_time_with_a_short_reason():
+    b = buffer()
+    names = [f"junk_{i}" for i in range(50_000)] * 2  # every name twice: duplicates
+    v = b.submit_named(names, np.zeros(len(names)))
+    assert v.kind == cmd.DUPLICATE_JOINT and "and 49992 more" in v.reason
+    v = b.submit_named(names[:50_000], np.zeros(50_000))
+    assert v.kind == cmd.UNKNOWN_JOINT and len(v.reason) < 1000
+    v = b.submit_named(["x" * 1_000_000], [1.0])
+    assert v.kind == cmd.UNKNOWN_JOINT and len(v.reason) < 1000
+
+
+JOINTS = ["left_base", "left_elbow", "right_base", "right_elbow"]
+efforts_st = st.floats(allow_nan=True, allow_infinity=True, width=64)
+commands_st = st.one_of(
+    st.tuples(st.just("array"), st.lists(efforts_st, max_size=5), st.just(())),
+    st.lists(st.tuples(st.sampled_from([*JOINTS, "nose", ""]), efforts_st), max_size=5).map(
+        lambda pairs: ("named", [e for _, e in pairs], tuple(n for n, _ in pairs))),
+    st.tuples(st.just("named"), st.lists(efforts_st, max_size=3),
+              st.lists(st.sampled_from(JOINTS), max_size=3).map(tuple)),
+)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.lists(commands_st, min_size=1, max_size=12))
+def test_fuzzed_commands_apply_exactly_the_valid_ones_clamped(sequence):
+    # Oracle: the rules of the module docstring, written out independently of the buffer.
+    b = buffer()
+    expected = np.zeros(2)
+    for kind, values, names in sequence:
+        if kind == "array":
+            valid = len(values) == 2 and all(math.isfinite(x) for x in values)
+            update = dict(zip(["left_base", "right_base"], values, strict=False))
+            verdict = b.submit_array(values)
+        else:
+            valid = (len(names) > 0 and len(names) == len(values) and len(set(names)) == len(names)
+                     and set(names) <= {"left_base", "right_base"}
+                     and all(math.isfinite(x) for x in values))
+            update = dict(zip(names, values, strict=False))
+            verdict = b.submit_named(list(names), values)
+        assert verdict.accepted == valid, (kind, values, names, verdict)
+        if valid:
+            for i, name in enumerate(["left_base", "right_base"]):
+                if name in update:
+                    expected[i] = min(max(update[name], -50.0), 50.0)
+        else:
+            assert verdict.reason and len(verdict.reason) < 1000
+        latched = b.latch().efforts
+        np.testing.assert_array_equal(latched, expected)  # exact: copies and clamps only
 
 
 def test_named_command_updates_only_the_named_actuators():

@@ -20,8 +20,10 @@ Callbacks and the loop run in different threads; every method is thread-safe.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -78,8 +80,14 @@ class Latched:
     timed_out: bool
 
 
+LISTED = 8
+"""Most entries a refusal lists (a flood of junk names must not become a flood of text)."""
+
+
 def _names(items: Sequence[str]) -> str:
-    return ", ".join(f"'{s}'" for s in items)
+    shown = ", ".join(f"'{s[:64]}'" for s in items[:LISTED])
+    more = len(items) - LISTED
+    return f"{shown} and {more} more" if more > 0 else shown
 
 
 class CommandBuffer:
@@ -147,7 +155,7 @@ class CommandBuffer:
                 f"expected {n} value{'s' if n != 1 else ''} (actuators in scene order: "
                 f"{_names(self.actuator_names)}), found {v.size}",
             )
-        bad = [i for i in range(n) if not np.isfinite(v[i])]
+        bad = [i for i in range(n) if not math.isfinite(v[i])]
         if bad:
             what = ", ".join(f"{self.actuator_names[i]} = {v[i]}" for i in bad)
             return self._reject(NON_FINITE, f"non-finite effort ({what})")
@@ -179,7 +187,7 @@ class CommandBuffer:
             return self._reject(
                 WRONG_LENGTH, f"'name' has {len(names)} entries but 'effort' has {e.size}"
             )
-        dup = sorted({s for s in names if names.count(s) > 1})
+        dup = sorted(s for s, count in Counter(names).items() if count > 1)
         if dup:
             return self._reject(DUPLICATE_JOINT, f"joint named more than once: {_names(dup)}")
         unknown = [s for s in names if s not in self._joints]
@@ -195,7 +203,7 @@ class CommandBuffer:
                 f"joint {_names(passive)} has no actuator (actuated joints: "
                 f"{_names(self.actuator_names)})",
             )
-        bad = [f"{s} = {x}" for s, x in zip(names, e, strict=True) if not np.isfinite(x)]
+        bad = [f"{s} = {x}" for s, x in zip(names, e, strict=True) if not math.isfinite(x)]
         if bad:
             return self._reject(NON_FINITE, f"non-finite effort ({', '.join(bad)})")
         with self._cv:
