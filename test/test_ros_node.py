@@ -383,7 +383,9 @@ def test_bad_commands_are_refused_with_throttled_reasons_and_limits_clamp(harnes
 
 # ---------------------------------------------------------------- services
 def test_pause_step_reset_services(harness):
-    h = harness(rate_hz=100.0, realtime=True)
+    # 100 Hz ticks (slow enough to pause between them); two substeps keep the thesis gains
+    # inside rk4's stability bound (one 10 ms step is refused by the stiffness check).
+    h = harness(rate_hz=100.0, substeps=2, realtime=True)
     h.start()
     wait_for(lambda: len(h.messages("/joint_states")) > 5, 10.0, "joint states")
     res = h.call(SetBool, f"{NODE}/pause", SetBool.Request(data=True))

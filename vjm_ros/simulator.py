@@ -12,7 +12,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .constraints import ExactClosure, PenaltyClosure, effective_masses
+from .constraints import (
+    ExactClosure,
+    PenaltyClosure,
+    closure_mobility,
+    penalty_modes,
+)
 from .errors import ConfigurationError, DivergenceError, StiffnessError
 from .integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from .kinematics import forward_kinematics, link_segments, point_positions
@@ -23,6 +28,12 @@ THESIS_KP = 1e5
 """The thesis's closure stiffness (Tables 4.1-4.5, printed as "Ns/m"), N/m."""
 THESIS_KV = 100.0
 """The thesis's closure damping, N s/m."""
+
+STIFFNESS_MARGIN = 1e-6
+"""Relative margin below a stability bound: a closure mode whose ``omega_n h`` comes within it of
+the bound is refused. On the bound the linearized closure error neither grows nor decays, and
+the changing pose tips it over (double_slider with semi-implicit Euler at ``Kp h (h + 2 Kv/Kp)
+= 4 m_eff`` exactly diverges within 0.4 s)."""
 
 
 @dataclass(frozen=True)
@@ -54,7 +65,8 @@ class SimulationSettings:
         ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
         error without numba) or ``"numpy"`` (the reference implementation).
     check_stiffness : bool
-        Refuse penalty gains beyond the integrator's stability bound before running.
+        Refuse penalty gains beyond the integrator's stability bound before running (judged on
+        the coupled closure modes at the initial pose, see :attr:`Simulator.stiffness_report`).
     divergence_limit : float or None
         Largest closure residual (m or rad) before the run is stopped; None disables the check.
     """
@@ -239,63 +251,162 @@ class Simulator:
             kv = 2.0 * z * meff * float(wn)
         return PenaltyClosure(kp=kp, kv=kv)
 
-    def _effective_masses(self) -> np.ndarray:
-        probe = Mechanism(self.model, ExactClosure())
-        ev = probe.evaluate(self.q0, self.qd0, np.zeros(self.model.n))
-        meff = effective_masses(ev.dyn.mass_matrix, ev.closure.jacobian)
-        return np.where(np.isfinite(meff), meff, 0.0)
+    def _mobility_at(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """``G = A M^-1 A^T`` at state ``(q, qd)``, shape (r, r)."""
+        ev = Mechanism(self.model, ExactClosure()).evaluate(q, qd, np.zeros(self.model.n))
+        return closure_mobility(ev.dyn.mass_matrix, ev.closure.jacobian)
+
+    def _initial_mobility(self) -> np.ndarray:
+        """``G`` at the initial state, shape (r, r) (computed once)."""
+        if getattr(self, "_mobility", None) is None:
+            self._mobility = self._mobility_at(self.q0, self.qd0)
+        return self._mobility
+
+    def _effective_masses(self, mobility: np.ndarray | None = None) -> np.ndarray:
+        """Per-row effective mass ``1 / G_ii`` (0 for a row no coordinate moves), shape (r,)."""
+        diag = np.diag(self._initial_mobility() if mobility is None else mobility)
+        with np.errstate(divide="ignore"):
+            return np.where(diag > 0, 1.0 / np.maximum(diag, 1e-300), 0.0)
 
     def _stiffness_report(self) -> list[dict]:
-        """Per closure row: effective mass, omega_n, zeta, omega_n h and the method's bound."""
+        """The coupled closure modes at the initial pose against the method's stability bound.
+
+        Linearized near the closure manifold, the penalty closure error obeys
+        ``Cddot = -G (Kp C + Kv Cdot)`` with ``G = A M^-1 A^T``
+        (:func:`~vjm_ros.constraints.penalty_modes`): rows that share links ring together, and
+        a coupled mode can be stiffer than any row alone. Each mode is a damped oscillator
+        ``(omega_n, zeta)``; a fixed step ``h`` carries it while ``omega_n h`` stays within
+        ``integrator.stability_bound(zeta)``, computed from the method's own step (for a
+        Runge-Kutta method the same as ``|R(h mu)| <= 1`` on both roots ``mu`` of the mode).
+        Adaptive methods and ``implicit_euler`` have no bound (``inf``). The pose changes
+        ``G`` as the mechanism moves; the check judges the initial pose only (no cost per tick),
+        and the divergence guard judges the last good poses when a run fails.
+
+        Returns
+        -------
+        list of dict
+            One entry per mode, stiffest first: ``closure`` and ``row`` (the row carrying the
+            largest share of the mode), ``rows``, ``share`` and ``closures`` (the rows that
+            together carry 90 % of it, largest share first, and their closures), ``m_eff``
+            (kg or kg m^2) and ``row_omega_n`` (rad/s) of that row alone, ``omega_n`` (rad/s),
+            ``zeta``, ``omega_h`` (``omega_n h``) and ``bound`` of the mode.
+        """
+        self._step_radius = None
         if not isinstance(self.method, PenaltyClosure) or self.model.n_rows == 0:
             return []
-        meff = self._effective_masses()
-        rows = []
-        cache: dict[float, float] = {}
+        report, self._step_radius = self._closure_modes(self._initial_mobility())
+        return report
+
+    def _closure_modes(self, g: np.ndarray) -> tuple[list[dict], float | None]:
+        """Report entries of :meth:`_stiffness_report` for mobility ``g``, shape (r, r).
+
+        Returns
+        -------
+        report : list of dict
+        radius : float or None
+            Spectral radius of one step on the coupled closure dynamics, computed only when the
+            gains are not proportional (``Kv != c Kp``) and the method has a finite bound.
+        """
+        kp, kv = self.method.kp, self.method.kv
+        modes = penalty_modes(g, kp, kv)
+        meff = self._effective_masses(g)
         names = [c.name for c in self.model.closures for _ in range(c.rows)]
-        for i, name in enumerate(names):
-            kp, kv, m = self.method.kp[i], self.method.kv[i], meff[i]
-            if m <= 0 or kp <= 0:
-                continue
-            wn = float(np.sqrt(kp / m))
-            zeta = float(kv / (2.0 * np.sqrt(kp * m)))
-            if self.integrator.fixed_step:
-                key = round(zeta, 4)
-                if key not in cache:
-                    cache[key] = float(self.integrator.stability_bound(key))
-                bound = cache[key]
-            else:
-                bound = np.inf
-            rows.append(
+        fixed = self.integrator.fixed_step
+        if fixed and modes.omega_n.size:
+            bounds = self.integrator.stability_bounds(modes.zeta)
+        else:
+            bounds = np.full(modes.omega_n.size, np.inf)
+        radius = None
+        if (
+            fixed
+            and not modes.proportional
+            and modes.stiffness.size
+            and np.isfinite(self.integrator.stability_bound(0.0))
+        ):
+            # Modes of non-proportional gains are not independent oscillators: judge the
+            # method's own step on the coupled system as well.
+            step = self.integrator.step_matrix(modes.stiffness, modes.damping, self.h)
+            radius = float(np.max(np.abs(np.linalg.eigvals(step))))
+        report = []
+        for j, wn in enumerate(modes.omega_n):
+            share = modes.share[j]
+            order = [int(i) for i in np.argsort(-share, kind="stable")]
+            cover = int(np.searchsorted(np.cumsum(share[order]), 0.9 * float(share.sum()))) + 1
+            rows = order[: min(cover, len(order))]
+            top = rows[0]
+            m = float(meff[top])
+            report.append(
                 {
-                    "closure": name,
-                    "row": i,
-                    "m_eff": float(m),
-                    "omega_n": wn,
-                    "zeta": zeta,
-                    "omega_h": wn * self.h,
-                    "bound": bound,
+                    "closure": names[top],
+                    "row": top,
+                    "closures": list(dict.fromkeys(names[i] for i in rows)),
+                    "rows": rows,
+                    "share": [float(share[i]) for i in rows],
+                    "m_eff": m,
+                    "row_omega_n": float(np.sqrt(kp[top] / m)) if m > 0 else float("nan"),
+                    "omega_n": float(wn),
+                    "zeta": float(modes.zeta[j]),
+                    "omega_h": float(wn) * self.h,
+                    "bound": float(bounds[j]),
                 }
             )
-        return rows
+        return report, radius
 
     def _check_stiffness(self) -> None:
-        for row in self.stiffness_report:
-            if row["omega_h"] > row["bound"]:
-                need = (
-                    int(np.ceil(row["omega_n"] * self.dt / row["bound"]))
-                    if row["bound"] > 0
-                    else None
-                )
-                hint = (
-                    f"use --substeps {need} or more, " if need else ""
-                ) + "the implicit_euler integrator, or --closure exact"
-                raise StiffnessError(
-                    f"closure '{row['closure']}' row {row['row']}: omega_n = {row['omega_n']:.4g} rad/s "
-                    f"(zeta = {row['zeta']:.3g}, effective mass {row['m_eff']:.4g}) gives omega_n*h = "
-                    f"{row['omega_h']:.3g} with h = {self.h:.3g} s, beyond the stability bound "
-                    f"{row['bound']:.3g} of {self.settings.integrator}; {hint}"
-                )
+        """Raise :class:`StiffnessError` when a closure mode is beyond the method's bound."""
+        report = self.stiffness_report
+        over = [m for m in report if m["omega_h"] > (1.0 - STIFFNESS_MARGIN) * m["bound"]]
+        radius = self._step_radius
+        # A full 2r x 2r step map (non-proportional gains only): its eigenvalues near a double
+        # root carry ~sqrt(eps) error, so growth counts from 1e-6 per step.
+        if not over and (radius is None or radius <= 1.0 + 1e-6):
+            return
+        integ = self.settings.integrator
+        usable = [m for m in report if m["bound"] > 0 and np.isfinite(m["bound"])]
+        need = max(
+            (
+                int(np.ceil(m["omega_n"] * self.dt / ((1.0 - STIFFNESS_MARGIN) * m["bound"])))
+                for m in usable
+            ),
+            default=self.settings.substeps,
+        )
+        hint = (
+            f"use --substeps {need} or more" if need > self.settings.substeps else "use more substeps"
+        ) + ", the implicit_euler integrator, --closure exact, or lower gains"
+        if not over:
+            raise StiffnessError(
+                f"penalty closure modes of {', '.join(repr(c.name) for c in self.model.closures)}:"
+                f" one step of {integ} with h = {self.h:.3g} s amplifies the closure error by "
+                f"{radius:.4g} (spectral radius of the step on the linearized closure dynamics "
+                f"at the initial pose, above 1); {hint}"
+            )
+        worst = max(over, key=lambda m: m["omega_h"] / max(m["bound"], 1e-300))
+        if worst["share"][0] >= 0.99:
+            where = f"closure '{worst['closure']}' row {worst['row']}"
+            alone = ""
+        else:
+            names = worst["closures"]
+            listed = ", ".join(f"'{c}'" for c in names[:4]) + (
+                f" and {len(names) - 4} more" if len(names) > 4 else ""
+            )
+            rows = worst["rows"]
+            shown = ", ".join(str(i) for i in rows[:6]) + (", ..." if len(rows) > 6 else "")
+            where = (
+                f"closure{'s' if len(names) > 1 else ''} {listed} (coupled mode of "
+                f"{len(rows)} row{'s' if len(rows) > 1 else ''}: {shown})"
+            )
+            alone = (
+                f"; row {worst['row']} alone: omega_n = {worst['row_omega_n']:.4g} rad/s"
+                if np.isfinite(worst["row_omega_n"])
+                else ""
+            )
+        side = "beyond" if worst["omega_h"] > worst["bound"] else "on"
+        raise StiffnessError(
+            f"{where}: omega_n = {worst['omega_n']:.4g} rad/s (zeta = {worst['zeta']:.3g}"
+            f"{alone}, effective mass {worst['m_eff']:.4g}) gives omega_n*h = {worst['omega_h']:.3g} with "
+            f"h = {self.h:.3g} s, {side} the stability bound {worst['bound']:.3g} of {integ} (at "
+            f"the initial pose); {hint}"
+        )
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -405,12 +516,25 @@ class Simulator:
     def _likely_cause(self) -> str:
         """Name the likely cause of a divergence, judged at the last good state."""
         if isinstance(self.method, PenaltyClosure) and self.stiffness_report:
-            worst = max(self.stiffness_report, key=lambda r: r["omega_h"] / max(r["bound"], 1e-12))
-            if worst["omega_h"] > 0.5 * worst["bound"]:
+            # The closure modes stiffen as the pose changes: judge the last good poses too.
+            worst, when = None, 0.0
+            states = [(0.0, self.stiffness_report)] + [
+                (t, self._closure_modes(self._mobility_at(q, qd))[0])
+                for t, q, qd in self._history
+                if t > 0 and np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
+            ]
+            for t, report in states:
+                for mode in report:
+                    ratio = mode["omega_h"] / max(mode["bound"], 1e-12)
+                    if worst is None or ratio > worst["omega_h"] / max(worst["bound"], 1e-12):
+                        worst, when = mode, t
+            if worst is not None and worst["omega_h"] > 0.5 * worst["bound"]:
+                pose = f" at t = {when:.6g} s" if when > 0 else ""
                 return (
                     f"penalty stiffness against step (omega_n*h = {worst['omega_h']:.3g}, bound "
-                    f"{worst['bound']:.3g} for {self.settings.integrator}); lower the gains, add "
-                    "substeps, or use implicit_euler or --closure exact"
+                    f"{worst['bound']:.3g} for {self.settings.integrator}{pose}, closure "
+                    f"'{worst['closure']}'); lower the gains, add substeps, or use implicit_euler "
+                    "or --closure exact"
                 )
         # Judge the pose over the last good ticks: a blow-up leaves the singular pose quickly.
         worst = None
