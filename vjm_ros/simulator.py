@@ -130,8 +130,8 @@ class Sample:
         Joint coordinates, rates, accelerations and applied efforts (N m or N).
     theta : ndarray, shape (n,)
         Absolute link angles, rad.
-    points : ndarray, shape (n_points, 2)
-        Named point positions, m.
+    points : ndarray, shape (n_points, 2), or None
+        Named point positions, m (None when the sample was taken without geometry).
     closure_force : ndarray, shape (k, 3)
         World-frame force of each closure on its point ``(Fx, Fy, Mz)``, N / N m.
     closure_error : ndarray, shape (k,)
@@ -144,8 +144,10 @@ class Sample:
         ``tau . qd``, W.
     dissipation : float
         ``sum Kv Cdot^2`` (penalty), W.
-    segments : ndarray, shape (n, 2, 2)
-        Link start/end points for drawing, m.
+    segments : ndarray, shape (n, 2, 2), or None
+        Link start/end points for drawing, m (None when taken without geometry).
+    sigma_min : float
+        Smallest singular value of the closure Jacobian (nan when not computed).
     """
 
     t: float
@@ -154,14 +156,14 @@ class Sample:
     qdd: np.ndarray
     effort: np.ndarray
     theta: np.ndarray
-    points: np.ndarray
+    points: np.ndarray | None
     closure_force: np.ndarray
     closure_error: np.ndarray
     closure_points: np.ndarray
     energy: np.ndarray
     power_in: float
     dissipation: float
-    segments: np.ndarray
+    segments: np.ndarray | None
     sigma_min: float = field(default=np.nan)
 
     @property
@@ -203,6 +205,8 @@ class Simulator:
         self.q0, self.qd0 = model.initial_state()
         self.selection = model.actuator_matrix()
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
+        self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
+        self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = self._closure_method()
         if self.settings.kernel == "numpy":
             self.mechanism = Mechanism(model, self.method)
@@ -570,13 +574,16 @@ class Simulator:
         return np.linalg.svd(ct.jacobian, compute_uv=False)
 
     # ------------------------------------------------------------------ outputs
-    def sample(self, singular_values: bool = False) -> Sample:
+    def sample(self, singular_values: bool = False, geometry: bool = True) -> Sample:
         """Evaluate every observable at the current state.
 
         Parameters
         ----------
         singular_values : bool
             Also compute the smallest singular value of the closure Jacobian.
+        geometry : bool
+            Also compute the named points and the link segments (for drawing and logs); False
+            leaves them None, for outputs that only need forces and energies.
 
         Returns
         -------
@@ -586,13 +593,11 @@ class Simulator:
         ev = mech.evaluate(self.q, self.qd, self.tau)
         kin = ev.dyn.kin
         model = self.model
-        pts = model.points
-        if pts:
-            links = np.array([p.ref.link for p in pts], dtype=int)
-            local = np.array([p.ref.local for p in pts], dtype=float)
-            points = point_positions(kin, links, local)
-        else:
-            points = np.zeros((0, 2))
+        points = segments = None
+        if geometry:
+            points = (point_positions(kin, self._point_links, self._point_local)
+                      if model.points else np.zeros((0, 2)))
+            segments = link_segments(model, kin)
         energy = mech.energies(ev, self.qd)
         dissipation = mech.method.dissipation(ev.closure) if mech.is_penalty else 0.0
         sigma = np.nan
@@ -612,7 +617,7 @@ class Simulator:
             energy=energy,
             power_in=float(self.tau @ self.qd),
             dissipation=dissipation,
-            segments=link_segments(model, kin),
+            segments=segments,
             sigma_min=sigma,
         )
 

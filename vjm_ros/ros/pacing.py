@@ -107,7 +107,8 @@ class Pacer:
         """Make the next tick due now (after a pause, a reset or a change of mode or period)."""
         self._next = None
 
-    def wait(self, cancelled: Callable[[], bool] | None = None) -> float:
+    def wait(self, cancelled: Callable[[], bool] | None = None,
+             approach: Callable[[], object] | None = None) -> float:
         """Block until the next tick is due and account for it.
 
         Parameters
@@ -115,6 +116,9 @@ class Pacer:
         cancelled : callable, optional
             Checked between sleep slices; when it returns True the wait ends early and the tick
             is not released (returns ``nan``).
+        approach : callable, optional
+            Called once when sleeping ends, ``margin`` before the deadline (realtime mode only):
+            the tick loop closes the executor's gate there (:class:`~.runtime.Spinner`).
 
         Returns
         -------
@@ -133,6 +137,8 @@ class Pacer:
                 return float("nan")
             self._sleep(min(target - now - self.margin, SLEEP_SLICE))
             now = self._clock()
+        if approach is not None:
+            approach()
         while now < target:
             self._yield()  # lets the executor thread take the GIL while this one spins
             now = self._clock()
