@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from vjm_ros.errors import ConfigurationError, DivergenceError, SceneError, StiffnessError
 from vjm_ros.ros import commands as cmd
 from vjm_ros.ros.commands import CommandBuffer, Throttle
-from vjm_ros.ros.loop import DURATION, STOPPED, LoopOptions, TickLoop
+from vjm_ros.ros.loop import DURATION, GATE_MIN_OPEN, STOPPED, LoopOptions, TickLoop
 from vjm_ros.ros.monitor import EnergyLedger, Monitor, assess
 from vjm_ros.ros.pacing import Pacer, PacingStats
 from vjm_ros.ros.settings import (
@@ -613,3 +613,36 @@ def test_divergence_stops_the_loop():
     loop = TickLoop(sim, commands, Collect(), LoopOptions(realtime=False, marker_period=0.0))
     with pytest.raises(DivergenceError, match="closure residual"):
         loop.run()
+
+
+class CoarseClock(FakeClock):
+    """A fake clock whose sleeps last at least a microsecond (as real ones do)."""
+
+    def sleep(self, dt):
+        super().sleep(max(dt, 1e-6))
+
+
+def test_ros_callbacks_are_gated_out_of_realtime_ticks_but_get_a_turn_when_behind():
+    clock = CoarseClock()
+    out = Collect()
+    gate_during_tick = []
+    sim = four_bar(1000.0)
+    commands = CommandBuffer(sim.model.actuator_names, sim.model.joint_names, sim.limits, 0.0)
+    loop = None
+
+    def slow_tick(t):
+        gate_during_tick.append(loop.gate.is_open)
+        clock.t += 0.0015 if 0.01 < t < 0.02 else 0.0002  # ten ticks longer than a period
+
+    out.on_joints = slow_tick
+    loop = TickLoop(sim, commands, out, LoopOptions(realtime=True, marker_period=0.0,
+                                                    duration=0.05),
+                    clock=clock, sleep=clock.sleep)
+    loop.pacer._yield = lambda: setattr(clock, "t", clock.t + 1e-5)  # spinning takes time
+    assert loop.run() == DURATION and loop.gate.is_open
+    assert gate_during_tick[0] and not any(gate_during_tick[1:])  # t = 0 is published ungated
+    # Behind schedule the loop still sleeps GATE_MIN_OPEN before closing the gate (the executor's
+    # turn); on schedule it sleeps towards the deadline instead.
+    turns = [dt for dt in clock.sleeps if dt == pytest.approx(GATE_MIN_OPEN, abs=1e-6)]
+    assert len(turns) >= 10
+    assert loop.pacer.stats.missed > 0
