@@ -25,16 +25,15 @@ EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 3
 
 
-class _Stop(BaseException):
-    """Raised from a signal handler to unwind the run loop (carries the exit code)."""
+class _StopRequest:
+    """SIGINT/SIGTERM during a run: the handler only records the signal, and the run loop stops
+    between two ticks, so that no log is interrupted in the middle of a write."""
 
-    def __init__(self, code: int):
-        super().__init__(code)
-        self.code = code
+    def __init__(self) -> None:
+        self.code = 0
 
-
-def _on_signal(signum, _frame):
-    raise _Stop(128 + signum)
+    def __call__(self, signum, _frame) -> None:
+        self.code = 128 + signum
 
 
 class Progress:
@@ -246,30 +245,36 @@ def _cmd_run(args) -> int:
     if args.out is not None:
         _prepare_dir(args.out)
 
-    recorders = _open_recorders(args, scene, sim)
     traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2)
     ticks = int(round(duration * settings.rate))
     progress = Progress(duration, sys.stderr.isatty() and sys.stdout.isatty())
-    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    stop = _StopRequest()
+    # Installed before any log is opened: from here on a signal ends the run between two ticks
+    # and every log is finalized.
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     code, error = 0, None
+    recorders: list = []
     wall0 = time.perf_counter()
     try:
+        recorders = _open_recorders(args, scene, sim)
         _record(traj, recorders, sim.sample())
         for _ in range(ticks):
+            if stop.code:
+                break
             sim.advance()
             _record(traj, recorders, sim.sample())
             progress.update(sim.t)
     except DivergenceError as exc:
         code, error = EXIT_DIVERGED, str(exc)
-    except _Stop as stop:
-        code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     finally:
         wall = time.perf_counter() - wall0
-        for s, h in old.items():
-            signal.signal(s, h)
         progress.close()
         for rec in recorders:
             rec.close()
+        for s, h in old.items():
+            signal.signal(s, h)
+    if stop.code and not code:
+        code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     summary = traj.summary(_run_info(sim, wall))
     if error:
         summary["error"] = error
