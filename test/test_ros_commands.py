@@ -16,7 +16,15 @@ from hypothesis import strategies as st
 from vjm_ros.errors import ConfigurationError, DivergenceError, SceneError, StiffnessError
 from vjm_ros.ros import commands as cmd
 from vjm_ros.ros.commands import CommandBuffer, Throttle
-from vjm_ros.ros.loop import DURATION, GATE_MIN_OPEN, STOPPED, LoopOptions, TickLoop
+from vjm_ros.ros.gate import Gate
+from vjm_ros.ros.loop import (
+    DURATION,
+    GATE_MIN_OPEN,
+    GATE_OPEN_SHARE,
+    STOPPED,
+    LoopOptions,
+    TickLoop,
+)
 from vjm_ros.ros.monitor import EnergyLedger, Monitor, assess
 from vjm_ros.ros.pacing import Pacer, PacingStats
 from vjm_ros.ros.settings import (
@@ -646,3 +654,41 @@ def test_ros_callbacks_are_gated_out_of_realtime_ticks_but_get_a_turn_when_behin
     turns = [dt for dt in clock.sleeps if dt == pytest.approx(GATE_MIN_OPEN, abs=1e-6)]
     assert len(turns) >= 10
     assert loop.pacer.stats.missed > 0
+
+
+def test_gate_lets_callbacks_start_only_until_its_closing_time():
+    clock = FakeClock()
+    gate = Gate(clock)
+    assert gate.is_open and gate.enter(0.0)  # open without limit at first
+    gate.open(until=0.0006)
+    clock.t = 0.0005
+    assert gate.enter(0.0)
+    clock.t = 0.0006
+    assert not gate.is_open and not gate.enter(0.0)  # a callback may not start any more
+    gate.open()
+    assert gate.enter(0.0)
+    gate.close()
+    assert not gate.enter(0.0)
+    # Another thread waiting to enter is woken by open().
+    threading.Timer(0.05, gate.open).start()
+    assert gate.enter(5.0)
+
+
+def test_realtime_tick_opens_the_gate_for_a_share_of_the_time_to_the_next_deadline():
+    clock = CoarseClock()
+    sim = four_bar(1000.0)
+    commands = CommandBuffer(sim.model.actuator_names, sim.model.joint_names, sim.limits, 0.0)
+    closing = []
+    out = Collect(lambda t: None)
+    loop = TickLoop(sim, commands, out, LoopOptions(realtime=True, marker_period=0.0,
+                                                    duration=0.01),
+                    clock=clock, sleep=clock.sleep)
+    loop.pacer._yield = lambda: setattr(clock, "t", clock.t + 1e-5)  # spinning takes time
+    original = loop.gate.open
+    loop.gate.open = lambda until=math.inf: (closing.append((clock.t, until)), original(until))
+    loop.run()
+    timed = [(now, until) for now, until in closing if until != math.inf]
+    assert len(timed) >= 9
+    for now, until in timed:  # 60 % of the way to the deadline that follows
+        due = loop.pacer.period * (math.floor(now / loop.pacer.period + 1e-9) + 1)
+        assert until == pytest.approx(now + GATE_OPEN_SHARE * (due - now), abs=1e-9)

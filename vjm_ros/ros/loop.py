@@ -41,6 +41,9 @@ from .pacing import Pacer
 
 WAIT_SLICE = 0.05
 """Longest uninterrupted wait of the loop, s (how soon it sees a request or a stop)."""
+GATE_OPEN_SHARE = 0.6
+"""Share of the time between two realtime ticks in which ROS callbacks may start; the rest
+lets a callback that started late finish before the tick is due."""
 GATE_MIN_OPEN = 1e-4
 """Shortest time the executor's gate stays open between two ticks, s: when the loop runs behind
 and catches up, ROS callbacks (the commands) still get a turn at every tick."""
@@ -183,7 +186,7 @@ class TickLoop:
         self._next_sigma = 0.0
         self._realtime = self.options.realtime
         self._holding = False
-        self.gate = Gate()
+        self.gate = Gate(clock)
         """When ROS callbacks may run: closed from just before a realtime tick's deadline until
         its outputs are out (:class:`~.gate.Gate`)."""
         self._gate_opened = -math.inf
@@ -285,6 +288,7 @@ class TickLoop:
 
     def _hold(self) -> None:
         """Keep the initial state until a command arrives, republishing it for late joiners."""
+        self.gate.open()
         if self.commands.wait_fresh(HOLD_REPUBLISH):
             self._holding = False
             self.pacer.restart()
@@ -323,8 +327,12 @@ class TickLoop:
         return not math.isnan(self.pacer.wait(self._interrupted, self._close_gate))
 
     def _open_gate(self) -> None:
-        self._gate_opened = self._clock()
-        self.gate.open()
+        now = self._gate_opened = self._clock()
+        due = self.pacer.next_due
+        if due is None or self.options.lockstep:
+            self.gate.open()
+        else:
+            self.gate.open(max(now + GATE_OPEN_SHARE * (due - now), now + GATE_MIN_OPEN))
 
     def _close_gate(self) -> None:
         """Stop ROS callbacks for the tick, after their minimal turn since the previous one."""
@@ -404,6 +412,7 @@ class TickLoop:
 
     def _idle(self) -> None:
         """Paused: serve steps, keep diagnostics going, otherwise wait."""
+        self.gate.open()
         with self._cv:
             if self._steps_asked == self._steps_done and not self._interrupted_while_paused():
                 self._cv.wait(WAIT_SLICE)

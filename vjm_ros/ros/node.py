@@ -98,8 +98,8 @@ EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3
 SWITCH_INTERVAL = 1e-4
 """The interpreter's thread switch interval in the node, s (Python's default is 5 ms): when the
 tick is due while the executor thread runs Python code, the tick thread gets the interpreter
-within this time. Measured under a 10 kHz command flood with ``realtime_priority:=50``: 93 % of
-the 1 kHz ticks kept with the default, 99.9 % with 0.1 ms."""
+within this time. Measured under a 10 kHz command flood with ``realtime_priority:=50``: 78 % of
+the 1 kHz ticks kept with the default, 99.7 % with 0.1 ms."""
 WARNING_PERIOD = 1.0
 """Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
 NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning"}
@@ -431,7 +431,8 @@ class SimNode(Node):
 def run(node: SimNode) -> int:
     """Spin ``node`` in a background thread and run its tick loop in this thread.
 
-    The executor thread starts first, so only the tick loop gets ``realtime_priority``.
+    The executor thread starts first, so only the tick loop gets ``realtime_priority``; the
+    callbacks are gated out of realtime ticks (:class:`~.gate.Gate`).
 
     Returns
     -------

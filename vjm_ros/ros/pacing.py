@@ -103,6 +103,11 @@ class Pacer:
         """Start delay beyond which a tick counts as late, s."""
         return 0.1 * self.period if self._tolerance is None else float(self._tolerance)
 
+    @property
+    def next_due(self) -> float | None:
+        """Wall-clock time the next tick is due, s (None in fast mode or right after a restart)."""
+        return self._next if self.realtime else None
+
     def restart(self) -> None:
         """Make the next tick due now (after a pause, a reset or a change of mode or period)."""
         self._next = None
