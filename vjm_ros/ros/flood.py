@@ -86,6 +86,7 @@ class FuzzCommands:
         self.rng = np.random.default_rng(seed)
         self.kinds = list(MIX)
         self.weights = np.array([MIX[k] for k in self.kinds]) / sum(MIX.values())
+        self._cumulative = np.cumsum(self.weights)
         self.applicable: list[set[float]] = [set() for _ in self.actuators]
         self.sent: Counter = Counter()
 
@@ -112,7 +113,8 @@ class FuzzCommands:
         values : ndarray
             Efforts, N m or N.
         """
-        kind = self.kinds[int(self.rng.choice(len(self.kinds), p=self.weights))]
+        kind = self.kinds[min(int(np.searchsorted(self._cumulative, self.rng.random(), "right")),
+                              len(self.kinds) - 1)]
         self.sent[kind] += 1
         n, rng = len(self.actuators), self.rng
         every = list(range(n))
@@ -186,6 +188,7 @@ def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, 
             print("vjm_flooder: the simulator's command topics never matched", file=sys.stderr)
             return 1
         time.sleep(0.01)
+    array_msg, named_msg = Float64MultiArray(), JointState()  # reused: publishing copies
     period = 1.0 / rate
     published = 0
     t0 = time.monotonic()
@@ -199,9 +202,11 @@ def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, 
             kind, topic, names, values = fuzz.next()
             data = array.array("d", values.tobytes())
             if topic == "effort_commands":
-                pubs[topic].publish(Float64MultiArray(data=data))
+                array_msg.data = data
+                pubs[topic].publish(array_msg)
             else:
-                pubs[topic].publish(JointState(name=names, effort=data))
+                named_msg.name, named_msg.effort = names, data
+                pubs[topic].publish(named_msg)
             published += 1
     wall = time.monotonic() - t0
     sentinel = fuzz.sentinel()
