@@ -75,14 +75,16 @@ def test_a_live_node_survives_a_10_khz_flood_of_fuzzed_commands():
     for topic, lines in row["warnings"].items():
         assert lines <= bound, (topic, lines, bound)
     assert row["warning_lines"] > 0  # and the refusals were reported
-    # Memory stays flat. The oversized arrays (up to 800 kB each) fill the DDS and keep-last
-    # queues in the first seconds (~15 MB measured, bounded by 10 messages per queue); after
-    # that the resident size must not trend: the slope over the second half of the flood,
-    # extrapolated over a whole flood, stays under 3 MB (a leak of 30 bytes per command would
-    # exceed it; sample-to-sample noise here is ~1.5 MB, which the fit averages out).
+    # Memory stays flat. The samples start when the flooder process starts (~2-3 s before its
+    # first command). The oversized arrays (8-800 kB, three fixed sizes) fill the transport's and
+    # the keep-last queues' buffers within ~3 s of flooding (~10-15 MB measured, bounded by 10
+    # messages per queue); after that the resident size must not trend: the slope over the last
+    # 40 % of the samples (the last ~5 s of flood), extrapolated over a whole flood, stays under
+    # 3 MB (a leak of 30 bytes per command would exceed it; sample-to-sample noise here is
+    # ~1 MB, which the fit averages out).
     mb = np.array(row["rss_series_mb"])
     assert mb.size >= 20, mb
-    half = mb[mb.size // 2:]
-    slope = np.polyfit(np.arange(half.size) * 0.25, half, 1)[0]  # MB/s (samples every 0.25 s)
+    tail = mb[int(0.6 * mb.size):]
+    slope = np.polyfit(np.arange(tail.size) * 0.25, tail, 1)[0]  # MB/s (samples every 0.25 s)
     assert slope * FLOOD_SECONDS < 3.0, (slope, row["rss_series_mb"])
     assert mb.max() - mb[0] < 40.0, row["rss_series_mb"]

@@ -610,3 +610,11 @@ def test_params_file_loads_and_logs_are_written(tmp_path):
         topics = {c.topic for c in reader.get_summary().channels.values()}
         assert "/joint_states" in topics
         assert sum(1 for _ in reader.iter_messages(topics=["/joint_states"])) == 201
+
+
+def test_a_log_that_fills_up_is_given_up_while_the_node_runs_on():
+    code, out = finish(node_process("realtime:=false", "duration:=0.5", "mcap:=/dev/full"))
+    assert code == 0, out
+    assert summary_of(out)["ticks"] == 500  # the simulation went on without the log
+    assert re.search(r"WARN.*log /dev/full could not be written \(No space left on device\); "
+                     r"recording to it stopped", out), out

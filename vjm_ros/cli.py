@@ -3,8 +3,10 @@
 Subcommands: ``scenes``, ``run``, ``bench``, ``replay``, ``recover``. See DESIGN section 5.
 
 Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
-running); 3 the simulation diverged (what was recorded up to then is written); 130 interrupted by
-SIGINT and 143 by SIGTERM (outputs recorded so far are written and log files finalized).
+running, a log path that cannot be written or a nearly full disk); 3 the simulation diverged (what
+was recorded up to then is written); 4 a log could not be written during the run (the run went on
+without it; see :mod:`vjm_ros.recorders.storage`); 130 interrupted by SIGINT and 143 by SIGTERM
+(outputs recorded so far are written and log files finalized).
 """
 
 from __future__ import annotations
@@ -19,10 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ConfigurationError, DivergenceError, SceneError, VjmError
+from .recorders.storage import LogWriters
 
 DEFAULT_SCENE = "four_bar"
 EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 3
+EXIT_LOG_FAILED = 4
 
 
 class _StopRequest:
@@ -253,28 +257,31 @@ def _cmd_run(args) -> int:
     # and every log is finalized.
     old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     code, error = 0, None
-    recorders: list = []
+    logs = None
     wall0 = time.perf_counter()
     try:
-        recorders = _open_recorders(args, scene, sim)
-        _record(traj, recorders, sim.sample())
+        logs = LogWriters(_open_recorders(args, scene, sim, duration), _report_log_failure)
+        _record(traj, logs, sim.sample())
         for _ in range(ticks):
             if stop.code:
                 break
             sim.advance()
-            _record(traj, recorders, sim.sample())
+            _record(traj, logs, sim.sample())
             progress.update(sim.t)
     except DivergenceError as exc:
         code, error = EXIT_DIVERGED, str(exc)
     finally:
         wall = time.perf_counter() - wall0
         progress.close()
-        for rec in recorders:
-            rec.close()
+        if logs is not None:
+            logs.close()
         for s, h in old.items():
             signal.signal(s, h)
     if stop.code and not code:
         code, error = stop.code, f"interrupted by signal {stop.code - 128}"
+    if logs is not None and logs.failed and not code:
+        code = EXIT_LOG_FAILED
+        error = "; ".join(f"log {where} could not be written ({why})" for where, why in logs.failed)
     summary = traj.summary(_run_info(sim, wall))
     if error:
         summary["error"] = error
@@ -307,7 +314,12 @@ def _prepare_dir(path: Path) -> None:
         ) from None
 
 
-def _open_recorders(args, scene, sim) -> list:
+def _open_recorders(args, scene, sim, duration: float) -> list:
+    from .recorders.storage import check_log_path, is_file_target
+
+    for key, target in (("--mcap", args.mcap), ("--rrd", args.rrd)):
+        if target is not None and is_file_target(target):
+            check_log_path(target, key, duration, sim.settings.rate)
     recorders = []
     try:
         if args.mcap is not None:
@@ -325,10 +337,14 @@ def _open_recorders(args, scene, sim) -> list:
     return recorders
 
 
-def _record(traj, recorders, sample) -> None:
+def _record(traj, logs, sample) -> None:
     traj.append(sample)
-    for rec in recorders:
-        rec.write(sample)
+    logs.write(sample)
+
+
+def _report_log_failure(where: str, why: str) -> None:
+    print(f"vjm: log {where} could not be written ({why}); recording to it stopped, the run "
+          "goes on", file=sys.stderr)
 
 
 def _run_info(sim, wall: float) -> dict:

@@ -45,6 +45,7 @@ import rerun.blueprint as rrb
 
 from ..model import ANGLE, GROUND, Model
 from . import Recorder, Timebase, messages, package_versions, tick_of
+from .storage import VIEWER_SCHEMES
 
 TIMELINE = "sim_time"
 ROOT = "mechanism"
@@ -55,7 +56,7 @@ SERIES = {
     "energy": "series/energy",
     "error": "series/closure_error",
 }
-_CONNECT_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+_CONNECT_SCHEMES = VIEWER_SCHEMES
 _LINK_COLORS = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75]],
     dtype=np.uint8,

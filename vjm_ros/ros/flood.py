@@ -58,8 +58,10 @@ MIX: dict[str, float] = {
     EMPTY_NAMED: 0.027,
 }
 """Share of each class of command in a flood (sums to 1)."""
-OVERSIZED_LENGTH = (1_000, 100_000)
-"""Range of lengths of the oversized arrays (8 kB to 800 kB each)."""
+OVERSIZED_LENGTHS = (1_000, 10_000, 100_000)
+"""Lengths of the oversized arrays (8 kB to 800 kB each). A few fixed sizes: the transport's
+buffers reach their largest size within the first second, so that any later growth of the
+node's memory is a leak, not a new record size."""
 SENTINEL_FRACTION = 0.123456789
 """The last command: this fraction of each actuator's limit (a value no other command uses)."""
 
@@ -131,7 +133,7 @@ class FuzzCommands:
             length += length == n
             return kind, "effort_commands", [], rng.uniform(-1, 1, length)
         if kind == OVERSIZED:
-            length = int(rng.integers(*OVERSIZED_LENGTH))
+            length = OVERSIZED_LENGTHS[int(rng.integers(len(OVERSIZED_LENGTHS)))]
             return kind, "effort_commands", [], rng.uniform(-1, 1, length)
         if kind == VALID_NAMED:
             order = rng.permutation(n)

@@ -33,6 +33,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..recorders.storage import LogWriters
 from ..simulator import Sample, Simulator
 from .commands import CommandBuffer
 from .gate import Gate
@@ -78,7 +79,7 @@ class Outputs(Protocol):
 
     def notice(self, kind: str, text: str) -> None:
         """An event: ``command_timeout``, ``lockstep_timeout``, ``paused``, ``resumed``,
-        ``stepped``, ``reset``, ``started``."""
+        ``stepped``, ``reset``, ``started``, ``log_failed``."""
 
     def rebuilt(self, simulator: Simulator) -> None:
         """The simulator was replaced (new settings applied at a reset)."""
@@ -169,7 +170,7 @@ class TickLoop:
         self.commands = commands
         self.outputs = outputs
         self.options = options or LoopOptions()
-        self.recorders = list(recorders)
+        self.logs = LogWriters(recorders, self._log_failed)
         self._clock = clock
         self._sleep = sleep
         self.pacer = Pacer(simulator.dt, self.options.realtime, clock=clock, sleep=sleep)
@@ -190,6 +191,16 @@ class TickLoop:
         """When ROS callbacks may run: closed from just before a realtime tick's deadline until
         its outputs are out (:class:`~.gate.Gate`)."""
         self._gate_opened = -math.inf
+
+    @property
+    def recorders(self) -> list:
+        """The logs still being written."""
+        return self.logs.active
+
+    def _log_failed(self, where: str, error: str) -> None:
+        self.outputs.notice(
+            "log_failed", f"log {where} could not be written ({error}); recording to it stopped "
+            f"at t = {self.sim.t:.6g} s, the simulation goes on")
 
     # ------------------------------------------------------------------ requests (any thread)
     def stop(self) -> None:
@@ -375,8 +386,7 @@ class TickLoop:
             if forces:
                 outputs.dynamics(sample)
                 self.monitor.observe(sample)
-            for rec in self.recorders:
-                rec.write(sample)
+            self.logs.write(sample)
             if draw:
                 outputs.markers(sample)
                 self._next_markers = now + opts.marker_period
@@ -388,8 +398,7 @@ class TickLoop:
         self.outputs.joints(sample.t, sample.q, sample.qd, sample.effort)
         self.outputs.dynamics(sample)
         self.monitor.observe(sample)
-        for rec in self.recorders:
-            rec.write(sample)
+        self.logs.write(sample)
         if self.options.marker_period > 0:
             self.outputs.markers(sample)
 
@@ -446,8 +455,7 @@ class TickLoop:
         else:
             self.sim.reset()
         self.commands.clear()
-        for rec in self.recorders:
-            rec.note_reset(t_before)
+        self.logs.note_reset(t_before)
         self.monitor.reset(0.0)
         self._next_sigma = 0.0
         self.pacer.restart()

@@ -75,6 +75,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ..errors import ConfigurationError, DivergenceError, VjmError
+from ..recorders.storage import check_log_path, is_file_target
 from ..scene import Scene
 from ..simulator import Sample, Simulator
 from . import conversions as conv
@@ -102,7 +103,8 @@ within this time. Measured under a 10 kHz command flood with ``realtime_priority
 the 1 kHz ticks kept with the default, 99.7 % with 0.1 ms."""
 WARNING_PERIOD = 1.0
 """Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
-NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning"}
+NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning",
+                 "log_failed": "warning"}
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -162,6 +164,8 @@ def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: 
                 cls = getattr(module, cls_name)
             except (ImportError, AttributeError) as exc:
                 raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
+            if is_file_target(path):
+                check_log_path(path, key, config.duration, sim.settings.rate)
             try:
                 args = (path, scene.model, settings, scene.text) if key == "mcap" else (path, scene.model, settings)
                 recorders.append(cls(*args))
@@ -388,12 +392,12 @@ class SimNode(Node):
     # ------------------------------------------------------------------ end
     def close(self) -> None:
         """Finalize the recorders (idempotent)."""
-        for rec in self.loop.recorders:
+        for rec in list(self.loop.recorders):
             try:
                 rec.close()
             except Exception as exc:  # a log that cannot be finalized must not hide the rest
                 self.get_logger().error(f"closing {type(rec).__name__}: {exc}")
-        self.loop.recorders = []
+            self.loop.logs.active.remove(rec)
 
     def summary(self, reason: str, wall: float, cpu: float) -> dict:
         """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s."""
