@@ -309,6 +309,33 @@ def test_finalize_on_signals_turns_sigterm_into_system_exit():
     assert signal.getsignal(signal.SIGTERM) is before
 
 
+def test_a_signal_during_a_write_takes_effect_when_the_write_returns(run, tmp_path):
+    scene, sim, first, _ = run
+    path = tmp_path / "atomic.mcap"
+    rec = McapRecorder(path, scene.model, sim.describe(), scene.text)
+    original = rec._put
+    sent = []
+
+    def put_with_a_signal(*args):
+        if not sent:  # SIGTERM between the first and the second message of a tick
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.05)  # the handler runs here: it must not raise inside the write
+        return original(*args)
+
+    rec._put = put_with_a_signal
+    with pytest.raises(SystemExit) as exc, finalize_on_signals(), rec:
+        rec.write(first[0])
+        raise AssertionError("the signal should end the block after the write")
+    assert exc.value.code == 128 + signal.SIGTERM
+    with open(path, "rb") as f:  # the whole tick is in the finalized log, and nothing else
+        reader = make_reader(f)
+        stats = reader.get_summary().statistics
+        # joints, forces, energy, clock, markers, and one wrench per closure
+        tick = 5 + len(scene.model.closures)
+        assert stats.message_count == sum(1 for _ in reader.iter_messages()) == tick
+
+
 WRITER = """
 import sys
 from vjm_ros.recorders import McapRecorder, finalize_on_signals

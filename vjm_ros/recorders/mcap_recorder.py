@@ -30,7 +30,7 @@ from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, IndexType, Writer
 
 from ..model import Model
-from . import Recorder, Timebase, cdr, messages, msgdefs, package_versions, tick_of
+from . import Recorder, Timebase, atomic, cdr, messages, msgdefs, package_versions, tick_of
 
 SCENE_ATTACHMENT = "scene.yaml"
 SCENE_MEDIA_TYPE = "application/yaml"
@@ -206,6 +206,7 @@ class McapRecorder(Recorder):
     def _add(self, topic: str, type_name: str, message: dict, ns: int) -> None:
         self._put(self._channels[topic], cdr.encode(type_name, message), ns)
 
+    @atomic
     def write(self, sample) -> None:
         """Log one tick.
 
@@ -231,6 +232,7 @@ class McapRecorder(Recorder):
         self.samples += 1
         self._maybe_flush(ns)
 
+    @atomic
     def note(self, text: str) -> None:
         """Log ``text`` on ``/<node>/events`` at the latest recording time."""
         if self._closed:
@@ -238,6 +240,7 @@ class McapRecorder(Recorder):
         ns = self.timebase.last_ns or 0
         self._add(self.topics.events, messages.STRING, messages.event(text), ns)
 
+    @atomic
     def note_reset(self, t: float | None = None) -> None:
         """Mark a simulator reset.
 

@@ -44,7 +44,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ..model import ANGLE, GROUND, Model
-from . import Recorder, Timebase, messages, package_versions, tick_of
+from . import Recorder, Timebase, atomic, messages, package_versions, tick_of
 from .storage import VIEWER_SCHEMES
 
 TIMELINE = "sim_time"
@@ -270,6 +270,7 @@ class RerunRecorder(Recorder):
         self._cyc: list[tuple] = []
 
     # ------------------------------------------------------------------ writing
+    @atomic
     def write(self, sample) -> None:
         """Buffer one tick; send the buffer when full or old.
 
@@ -356,6 +357,7 @@ class RerunRecorder(Recorder):
         vec[moment, 1] = forces[moment, 2]
         return self.force_scale * vec
 
+    @atomic
     def note(self, text: str, level: str = "INFO", t: float | None = None) -> None:
         """Log ``text`` on ``events``.
 
@@ -374,6 +376,7 @@ class RerunRecorder(Recorder):
         self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
         self.rec.log("events", rr.TextLog(text, level=level))
 
+    @atomic
     def note_reset(self, t: float | None = None) -> None:
         """Mark a simulator reset (see :meth:`vjm_ros.recorders.McapRecorder.note_reset`)."""
         if self._closed:
