@@ -10,8 +10,13 @@ One tick (:meth:`TickLoop.run`):
 3. advance the simulator by one tick;
 4. outputs: ``/clock`` every tick; joint states every ``publish_every`` ticks (from the state
    itself, cheap); constraint forces, wrenches and energy every ``forces_every`` ticks (these need
-   a full :meth:`~vjm_ros.simulator.Simulator.sample`); recorders every tick; markers and
+   a full :meth:`~vjm_ros.simulator.Simulator.sample`); recorders every tick (a log that cannot
+   be written is given up, :class:`~vjm_ros.recorders.storage.LogWriters`); markers and
    diagnostics at their wall-clock periods.
+
+In realtime mode ROS callbacks run between ticks: the loop's :class:`~.gate.Gate` lets them start
+in the first :data:`GATE_OPEN_SHARE` of the time to the next deadline and closes at the deadline's
+approach, so that a flood of incoming messages cannot hold the interpreter when a tick is due.
 
 The state at ``t = 0`` is published before the first tick (a lockstep controller answers it with
 the first command); in lockstep mode, resuming from a pause publishes the joint state again. With
