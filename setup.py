@@ -23,7 +23,8 @@ setup(
         "scipy>=1.10,<2",
         "PyYAML>=6,<7",
         "matplotlib>=3.6,<4",
-        "mcap>=1.1,<2",
+        # 1.4 is the first reader that reads indexed ROS 2 files in time order correctly.
+        "mcap>=1.4,<2",
         "mcap-ros2-support>=0.5,<1",
         "rerun-sdk>=0.41,<0.42",
         # Compiled physics kernel (vjm_ros/_kernels.py): ~30x per evaluation. 0.64 is the first
@@ -31,15 +32,24 @@ setup(
         "numba>=0.64,<1",
     ],
     extras_require={
-        "test": ["pytest>=8", "pytest-benchmark>=4", "hypothesis>=6.100", "ruff>=0.5"],
+        # rosbags: a third-party ROS 2 bag reader, so the tests read our logs with code not ours.
+        "test": [
+            "pytest>=8",
+            "pytest-benchmark>=4",
+            "hypothesis>=6.100",
+            "ruff>=0.5",
+            "rosbags>=0.11,<0.12",
+        ],
+        # MuJoCo side by side in `vjm bench`; 4.0.0 has a sparse-Cholesky bug fixed in 4.0.1.
         "compare": ["mujoco>=3.2,!=4.0.0"],
+        # `vjm sweep` / `vjm tune` on Dask distributed, results as Parquet.
+        "sweep": ["distributed>=2024.8", "pyarrow>=15"],
     },
     zip_safe=True,
     maintainer="vjm_ros maintainers",
     maintainer_email="vjm_ros@example.com",
     description="Planar closed-chain mechanisms by the virtual joint method, as a ROS 2 node and replayable logs.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "vjm = vjm_ros.cli:main",
