@@ -61,6 +61,14 @@ LAUGHS = "name: [&l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol], " + ", ".joi
     f"&l{i} [{', '.join([f'*l{i - 1}'] * 9)}]" for i in range(1, 10)
 ) + "]\n"  # 9 ** 10 leaves, shared: small in memory, astronomically long if printed
 
+# 60 mappings each merge one 200-key anchor: 12 000 merged entries, over MAX_MERGED_ENTRIES, refused
+# at the '<<' that crosses the limit (the 51st mapping, line 54) by the loader's own merge code,
+# the same under every PyYAML 6.x.
+MERGE_FLOOD = (
+    "name: x\n_base: &b {" + ", ".join(f"k{i}: {i}" for i in range(200)) + "}\n_flood:\n"
+    + "".join(f"  - {{<<: *b, own{i}: 1}}\n" for i in range(60))
+)
+
 # (class, file contents, key path, words of "expected", words of "found")
 CASES = [
     ("not_utf8", BASE.encode().replace(b"base", b"b\xe9se"), "line 1, column 8", "UTF-8 text",
@@ -77,10 +85,7 @@ CASES = [
      "a valid !!timestamp value", "2024-02-30"),
     ("too_deep", edit("defaults:", "description: " + "[" * 40 + "]" * 40 + "\ndefaults:"),
      f"line 25, column {MAX_NESTING + 13}", f"at most {MAX_NESTING} levels", "deeper nesting"),
-    ("merge_bomb",
-     "name: x\n_m0: &m0 {a: 1, b: 2}\n"
-     + "".join(f"_m{i}: &m{i} {{<<: [*m{i - 1}, *m{i - 1}], k{i}: 1}}\n" for i in range(1, 20)),
-     "line 13, column 13", "merge keys ('<<')", "entries"),
+    ("merge_flood", MERGE_FLOOD, "line 54, column 6", "merge keys ('<<')", "entries"),
     ("not_a_mapping", "- name: base\n- chains: []\n", TOP_KEY, "a mapping", "'name'"),
     ("empty_file", "", TOP_KEY, "a mapping", "None"),
     ("unknown_key", edit("defaults:", "colour: red\ndefaults:"), "colour", "one of the keys",
@@ -198,6 +203,65 @@ def test_error_names_file_key_expected_found(tmp_path, contents, key, expected, 
     message = str(exc)
     assert message.startswith(f"{path}: {key}: expected {exc.expected}, found ")
     assert len(message) < 1000
+
+
+def merge_bomb(levels: int) -> str:
+    """Each level merges the previous one twice: ``2 ** levels`` entries if copied naively."""
+    return "name: x\n_m0: &m0 {a: 1, b: 2}\n" + "".join(
+        f"_m{i}: &m{i} {{<<: [*m{i - 1}, *m{i - 1}], k{i}: 1}}\n" for i in range(1, levels + 1)
+    )
+
+
+def test_merge_bomb_costs_little_and_names_the_file(tmp_path):
+    """Merge keys that would copy 2**40 entries load in linear memory, and the error names the file.
+
+    A key arrives once however many merged mappings carry it, so level i holds i + 2 entries and
+    the whole document a few hundred; the scene builder then refuses the unknown key ``_m0``.
+    Budget: 16 MB of Python allocations at the peak (tracemalloc, deterministic for a given
+    interpreter); the document itself is 2 kB, and a naive expansion would need terabytes.
+    """
+    import tracemalloc
+
+    path = tmp_path / "bomb.yaml"
+    path.write_text(merge_bomb(40))
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneError) as info:
+            load_scene(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, f"peak {peak / 2**20:.1f} MB"
+    assert info.value.source == str(path)
+    assert info.value.key == "_m0" and "one of the keys" in info.value.expected
+
+
+def test_merge_keys_follow_the_yaml_merge_rules(tmp_path):
+    """Own keys win over merged ones, the first merged mapping wins over later ones, and a scene
+    written with merge keys loads exactly as the same scene written out in full."""
+    link = "{name: %s, length: %s, mass: 1.0, inertia: %s, joint: {name: %s, type: revolute}}"
+    written_out = edit(
+        "      - {name: rocker, length: 0.7, mass: 1.0, inertia: 0.04,\n"
+        "         joint: {name: rocker_joint, type: revolute, angle: 90.0}}",
+        "      - {name: rocker, length: 0.7, mass: 1.0, inertia: 0.04,\n"
+        "         joint: {name: rocker_joint, type: revolute, angle: 90.0}}\n"
+        "      - " + link % ("extra", "0.3", "0.02", "extra_joint"),
+    )
+    merged = edit(
+        "      - {name: rocker, length: 0.7, mass: 1.0, inertia: 0.04,\n"
+        "         joint: {name: rocker_joint, type: revolute, angle: 90.0}}",
+        "      - &rocker {name: rocker, length: 0.7, mass: 1.0, inertia: 0.04,\n"
+        "         joint: {name: rocker_joint, type: revolute, angle: 90.0}}\n"
+        "      - <<: [{inertia: 0.02, length: 0.3}, *rocker, {length: 9.0}]\n"
+        "        name: extra\n"
+        "        joint: {name: extra_joint, type: revolute}",
+    )
+    assert "extra" in written_out  # the extra link hangs off the rocker's tip, free
+    a_path, b_path = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a_path.write_text(written_out)
+    b_path.write_text(merged)
+    a, b = load_scene(a_path), load_scene(b_path)
+    assert (a.model.links, a.model.joints) == (b.model.links, b.model.joints)
 
 
 def test_class_names_unique():

@@ -140,30 +140,52 @@ class _SceneLoader(yaml.SafeLoader):
         return node
 
     def flatten_mapping(self, node):
-        """Expand merge keys, each mapping once, within :data:`MAX_MERGED_ENTRIES` in all.
+        """Expand merge keys (``<<``) once per mapping, within :data:`MAX_MERGED_ENTRIES` in all.
 
-        The entries a merge would copy are counted before PyYAML copies them, so that mappings
-        merged into each other level after level (which doubles the entries at every level) are
-        refused at once.
+        The expansion is ours, not PyYAML's, so a scene means the same under every PyYAML 6.x
+        (6.0.4 changed how its own expansion treats repeated keys). Semantics of the YAML merge
+        key: keys written in the mapping win over merged ones; of several merged mappings the
+        first listed wins; a key arrives once however many merged mappings carry it, so mappings
+        merged into each other level after level grow linearly, not exponentially. Every merged
+        entry looked at counts towards the limit, so a document cannot make the loader do more
+        than :data:`MAX_MERGED_ENTRIES` steps of merging.
         """
         if id(node) in self._flattened:
             return
         self._flattened.add(id(node))
+        own, sources = [], []
         for key_node, value_node in node.value:
             if key_node.tag != _MERGE_TAG:
+                if key_node.tag == "tag:yaml.org,2002:value":
+                    key_node.tag = "tag:yaml.org,2002:str"
+                own.append((key_node, value_node))
                 continue
-            merged = value_node.value if isinstance(value_node, SequenceNode) else [value_node]
-            for sub in merged:
-                if isinstance(sub, MappingNode):
-                    self.flatten_mapping(sub)
-                    self._merged += len(sub.value)
+            subs = value_node.value if isinstance(value_node, SequenceNode) else [value_node]
+            for sub in subs:
+                if not isinstance(sub, MappingNode):
+                    raise _Refused(
+                        sub.start_mark, "a mapping or a list of mappings after '<<'", sub.id
+                    )
+                sources.append((key_node, sub))
+        if not sources:
+            return
+        seen = {_key_identity(k) for k, _ in own}
+        merged = []
+        for key_node, sub in sources:
+            self.flatten_mapping(sub)
+            self._merged += len(sub.value)
             if self._merged > MAX_MERGED_ENTRIES:
                 raise _Refused(
                     key_node.start_mark,
                     f"merge keys ('<<') that copy at most {MAX_MERGED_ENTRIES} entries in all",
                     f"{self._merged} entries",
                 )
-        super().flatten_mapping(node)
+            for pair in sub.value:
+                ident = _key_identity(pair[0])
+                if ident not in seen:
+                    seen.add(ident)
+                    merged.append(pair)
+        node.value = merged + own
 
     def construct_object(self, node, deep=False):
         """Construct a value; PyYAML's own errors on malformed scalars become YAML errors."""
@@ -175,6 +197,13 @@ class _SceneLoader(yaml.SafeLoader):
             tag = node.tag.replace("tag:yaml.org,2002:", "!!")
             found = node.value if isinstance(node, ScalarNode) else type(node).__name__
             raise _Refused(node.start_mark, f"a valid {tag} value", found) from None
+
+
+def _key_identity(key_node) -> tuple:
+    """What makes two mapping keys the same key: tag and text for scalars, identity otherwise."""
+    if isinstance(key_node, ScalarNode):
+        return (key_node.tag, key_node.value)
+    return ("node", id(key_node))
 
 
 _SceneLoader.add_implicit_resolver(
