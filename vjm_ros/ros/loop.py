@@ -59,6 +59,9 @@ SIGMA_PERIOD = 0.01
 once a second, and a singular pose is approached over many ticks."""
 HOLD_REPUBLISH = 0.1
 """Period of the joint state republished while waiting for the first command, wall s."""
+PAUSE_WAIT = 5.0
+"""Longest a pause request waits for the tick under way to finish, wall s (a hang guard: a tick
+takes well under a millisecond)."""
 
 DURATION = "duration"
 STOPPED = "stopped"
@@ -184,6 +187,7 @@ class TickLoop:
         self._cv = threading.Condition()
         self._stop = False
         self._paused = paused
+        self._in_tick = False
         self._steps_asked = self._steps_done = 0
         self._resets_asked = self._resets_done = 0
         self._replacement: tuple[Simulator, CommandBuffer] | None = None
@@ -218,11 +222,18 @@ class TickLoop:
         return self._paused
 
     def pause(self, paused: bool) -> None:
-        """Suspend (True) or resume (False) the ticks."""
+        """Suspend (True) or resume (False) the ticks.
+
+        A pause takes effect at a tick boundary: a tick already under way (a callback may run
+        beside one) is finished before this returns, so ``sim.t`` is then the time of the last
+        state published, and no tick follows until resumed.
+        """
         with self._cv:
             changed = paused != self._paused
             self._paused = paused
             self._cv.notify_all()
+            if paused:
+                self._cv.wait_for(lambda: not self._in_tick, PAUSE_WAIT)
         if changed:
             self.outputs.notice("paused" if paused else "resumed",
                                 f"{'paused' if paused else 'resumed'} at t = {self.sim.t:.6g} s")
@@ -293,7 +304,16 @@ class TickLoop:
                     return DURATION
                 if not self._await_tick():
                     continue
-                self._tick()
+                with self._cv:
+                    if self._interrupted():  # a pause, reset or stop came while waiting
+                        continue
+                    self._in_tick = True
+                try:
+                    self._tick()
+                finally:
+                    with self._cv:
+                        self._in_tick = False
+                        self._cv.notify_all()
                 self._periodic()
                 self._open_gate()
             return STOPPED
