@@ -1,6 +1,6 @@
 """Speed of the physics hot path: the numpy reference against the compiled kernel.
 
-Run with ``python -m pytest test/bench_core.py --benchmark-enable -p no:cacheprovider`` (the
+Run with ``python -m pytest -m bench test/bench_core.py --benchmark-enable -p no:cacheprovider`` (the
 project's pytest options disable benchmarks by default; then each case runs once as a smoke test).
 Compare the cases of one group within one run: the machine is shared, so absolute times drift
 between runs while ratios hold. ``--benchmark-group-by=group`` (the default here) puts the
@@ -30,7 +30,10 @@ from vjm_ros.scene import load_scene
 from vjm_ros.simulator import SimulationSettings, Simulator
 from vjm_ros.system import Mechanism
 
-pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+pytestmark = [
+    pytest.mark.bench,
+    pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed"),
+]
 
 SCENES = ("four_bar", "five_bar")
 CLOSURES = ("penalty", "exact")

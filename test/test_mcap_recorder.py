@@ -304,7 +304,7 @@ def test_finalize_on_signals_turns_sigterm_into_system_exit():
     with pytest.raises(SystemExit) as exc:
         with finalize_on_signals():
             os.kill(os.getpid(), signal.SIGTERM)
-            time.sleep(1.0)  # the handler raises before this ends
+            time.sleep(1.0)  # the handler raises before this ends (a signal, not a speed)
     assert exc.value.code == 128 + signal.SIGTERM
     assert signal.getsignal(signal.SIGTERM) is before
 
@@ -368,7 +368,7 @@ def start_writer(path: Path) -> subprocess.Popen:
 
 def wait_for_messages(proc: subprocess.Popen, count: int, timeout: float = 30.0) -> str:
     """Read the writer's counts until it has written ``count`` messages; the last line read."""
-    deadline = time.monotonic() + timeout
+    deadline = time.monotonic() + timeout  # a hang guard, not a speed assertion
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
         if not line:

@@ -1,11 +1,13 @@
-"""Rerun recorder: a valid .rrd with the mechanism, the series and a blueprint, at a low cost."""
+"""Rerun recorder: a valid .rrd with the mechanism, the series and a blueprint.
+
+Its cost per tick is a benchmark (test/bench_logging.py), not asserted here.
+"""
 
 from __future__ import annotations
 
 import math
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -105,20 +107,6 @@ def test_recording_verifies_and_holds_mechanism_and_series(run, recording):
     )  # positions are stored as float32
     _, events = columns(recording, "/events", "TextLog:text")
     assert events == [["reset"]]
-
-
-def test_logging_cost_is_a_small_part_of_a_tick(run, tmp_path):
-    """Mean cost per 1 kHz tick below 10 % of the tick (100 us), for file and viewer batching."""
-    scene, sim, samples = run
-    for batch in (None, 100):
-        path = tmp_path / f"cost_{batch}.rrd"
-        rec = RerunRecorder(path, scene.model, sim.describe(), batch=batch, batch_seconds=1e9)
-        start = time.perf_counter()
-        for s in samples:
-            rec.write(s)
-        cost = (time.perf_counter() - start) / len(samples)
-        rec.close()
-        assert cost < 100e-6, f"batch={batch}: {cost * 1e6:.1f} us per tick"
 
 
 def test_close_is_idempotent(run, tmp_path):
