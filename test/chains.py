@@ -1,6 +1,6 @@
 """Random chain builders and an independent chain geometry for the physics tests.
 
-The geometry here is written from DESIGN section 1 alone, as a plain loop over each chain, and
+The geometry here is written from docs/design.md section 1 alone, as a plain loop over each chain, and
 reads only the scene description (chains, links, joints); it never uses the index arrays that
 ``Model.build`` derives nor anything in ``vjm_ros.kinematics``:
 
@@ -31,7 +31,7 @@ def n(theta):
 
 
 def frames(model: Model, q):
-    """Origin and absolute angle of every moving link, by the loop of DESIGN section 1.
+    """Origin and absolute angle of every moving link, by the loop of docs/design.md section 1.
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""The ``vjm`` command line contract of DESIGN section 5, through the installed entry point."""
+"""The ``vjm`` command line contract of docs/design.md section 5, through the installed entry point."""
 
 import csv
 import json

@@ -5,7 +5,7 @@ Oracles: the closure residual measured with the chain geometry written out in ``
 the Lagrange-multiplier system solved in the test from central-difference ``M``, ``A`` and
 ``dV/dq``; the penalty law ``F = -(Kp C + Kv Cdot)``; the stability limit of RK4 on the coupled
 closure modes; and the energy
-ledger of DESIGN section 2 integrated by the trapezoid rule.
+ledger of docs/design.md section 2 integrated by the trapezoid rule.
 """
 
 from __future__ import annotations
@@ -69,7 +69,7 @@ def test_exact_closure_holds_for_ten_seconds(four_bar):
     # step) are pulled back within ~0.1 s: the residual stays ~1e-10 m (measured 2.2e-10).
     assert worst <= 1e-9
     # The exact closure does no work, so T + V drifts only by RK4 error and the Baumgarte terms
-    # acting on a ~1e-10 m residual: measured 7e-9 of max T; bound 1e-6 (DESIGN energy_drift).
+    # acting on a ~1e-10 m residual: measured 7e-9 of max T; bound 1e-6 (docs/design.md energy_drift).
     assert drift < 1e-6 * t_max
 
 
@@ -282,7 +282,7 @@ def trapezoid(t, y):
 
 
 def test_penalty_energy_ledger(four_bar):
-    """Oracle: E = T + V + sum Kp C^2 / 2 obeys dE/dt = tau . qd - sum Kv Cdot^2 (DESIGN 2)."""
+    """Oracle: E = T + V + sum Kp C^2 / 2 obeys dE/dt = tau . qd - sum Kv Cdot^2 (docs/design.md section 2)."""
     sim = make_sim(four_bar, closure="penalty", integrator="rk4", rate=2000)  # scene Kp, Kv
     sim.set_efforts([1.0])
     t, energy, power, dissipated, kinetic = ledger(sim, 0.5)
@@ -344,7 +344,7 @@ def closure_model(seed):
 
 
 def closure_rows(model, q):
-    """Residuals of DESIGN section 2 from the independent geometry, stacked in scene order."""
+    """Residuals of docs/design.md section 2 from the independent geometry, stacked in scene order."""
     _, angles = ch.frames(model, q)
     rows = []
     for c in model.closures:
@@ -389,7 +389,7 @@ CLOSURE_SEEDS = [5, 8, 16, 17]
 
 @pytest.mark.parametrize("seed", CLOSURE_SEEDS)
 def test_closure_rows_match_independent_geometry(seed):
-    """Oracle: C, A, Cdot = A qd and Adot qd by central differences of the residuals of DESIGN 2.
+    """Oracle: C, A, Cdot = A qd and Adot qd by central differences of the residuals of docs/design.md section 2.
 
     Covers hinges (link-link and link-ground), sliders on a ground line and on a line carried by
     a moving link, and angle closures to ground and between links.
@@ -472,7 +472,7 @@ def test_penalty_generalized_force_for_every_closure_kind(seed):
 
 
 def test_gains_from_natural_frequency(four_bar):
-    """Oracle: Kp = m_eff wn^2, Kv = 2 zeta m_eff wn, m_eff = 1 / (A M^-1 A^T)_ii (DESIGN 2)."""
+    """Oracle: Kp = m_eff wn^2, Kv = 2 zeta m_eff wn, m_eff = 1 / (A M^-1 A^T)_ii (docs/design.md section 2)."""
     model = four_bar.model
     q, _ = model.initial_state()
     m = ch.mass_matrix_fd(model, q)

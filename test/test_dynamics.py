@@ -265,7 +265,7 @@ def test_mass_matrix_is_hessian_of_kinetic_energy(case):
 
 @pytest.mark.parametrize("case", CASES, ids=CASE_IDS)
 def test_energies_match_independent_geometry(case):
-    """Oracle: T and V from the chain loop of DESIGN section 1 (test/chains.py)."""
+    """Oracle: T and V from the chain loop of docs/design.md section 1 (test/chains.py)."""
     model, q, qd = case
     # T: velocity-difference error ~1e-10 relative; V: same positions, round-off only.
     assert kinetic_energy(model, q, qd) == pytest.approx(ch.kinetic(model, q, qd), rel=1e-8)

@@ -15,8 +15,8 @@ sometimes nearly singular; draws with ``kappa > KAPPA_MAX = 1e6`` are skipped, s
 comparison would measure conditioning, not physics.
 
 Over 1 s of RK4 at 1 kHz these round-off differences are carried through 1000 steps and amplified by
-the dynamics (the five-bar and three-chain scenes grow perturbations ~10-100x per second, DESIGN
-section 6): measured differences are ~1e-13, and ``RUN_TOL = 1e-9`` (rad, m, rad/s, m/s) leaves
+the dynamics (the five-bar and three-chain scenes grow perturbations ~10-100x per second,
+docs/design.md section 6): measured differences are ~1e-13, and ``RUN_TOL = 1e-9`` (rad, m, rad/s, m/s) leaves
 orders of magnitude of margin.
 """
 

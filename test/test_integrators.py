@@ -139,7 +139,7 @@ def test_implicit_penalty_euler_is_unconditionally_stable():
 
 
 def test_registry_has_fixed_step_methods():
-    """The live-node methods of DESIGN section 3 are registered as fixed-step."""
+    """The live-node methods of docs/design.md section 3 are registered as fixed-step."""
     for name in ("explicit_euler", "semi_implicit_euler", "rk4", "implicit_euler"):
         assert name in FIXED_STEP
 

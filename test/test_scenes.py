@@ -12,7 +12,7 @@ SCENES = builtin_scenes()
 
 
 def test_all_listed():
-    """The scenes DESIGN section 4 and issue 2 ask for are shipped."""
+    """The scenes docs/design.md section 4 and issue 2 ask for are shipped."""
     for name in (
         "four_bar",
         "six_bar",
@@ -60,7 +60,7 @@ def test_scene_runs_finite_and_deterministic(name):
 
 # Tip points printed in the thesis tables (m) and the rounding they carry: the tables give angles
 # to 0.01 deg, so tips built from them may differ from the printed tip by up to ~5 mm on the
-# three-chain's 5 m links; the double slider's printed x = 0.8 contradicts its lengths (DESIGN 4),
+# three-chain's 5 m links; the double slider's printed x = 0.8 contradicts its lengths (docs/design.md section 4),
 # so its line is placed at the position its lengths give (1.0 m).
 TABLE_TIPS = {
     "four_bar": ("chain1_tip", (1.0, 0.0), 1e-9),

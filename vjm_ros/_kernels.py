@@ -5,7 +5,7 @@ and :mod:`vjm_ros.system`, written as scalar loops over the links so that numba 
 machine code (``cache=True``: compiled once per machine, then loaded from the cache). Without numba
 the same functions run as plain Python, which is correct but slow.
 
-Recursions (DESIGN section 1), link ``i`` after link ``i - 1`` of its chain, or after the chain's
+Recursions (docs/design.md section 1), link ``i`` after link ``i - 1`` of its chain, or after the chain's
 ground link when it is the first one:
 
 * ``theta_pred_i = theta_(i-1)`` and ``theta_i = theta_pred_i + phi_i``;

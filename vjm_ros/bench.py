@@ -2,7 +2,7 @@
 
 For every scene the bench runs a grid of settings through :class:`~vjm_ros.simulator.Simulator`
 (so any faster kernel selected there is measured as it is) and, when MuJoCo is installed, the same
-mechanism in MuJoCo (:mod:`vjm_ros.compare_mujoco`). Each row reports (DESIGN section 6):
+mechanism in MuJoCo (:mod:`vjm_ros.compare_mujoco`). Each row reports (docs/design.md section 6):
 
 * cost: wall time per simulated second of the physics calls (``Simulator.advance`` or
   ``mj_step``), median of ``--repeats`` runs over the scene's horizon, single-threaded; sampling
@@ -1168,7 +1168,7 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
     -------
     dict
         Settings, ``sim_time``, ``wall_time``, ``max_closure_error``, ``final_closure_error``,
-        ``energy_drift`` (as DESIGN defines it), ``max_energy_change`` and ``max_energy_gain``
+        ``energy_drift`` (as docs/design.md defines it), ``max_energy_change`` and ``max_energy_gain``
         (largest ``|T+V - (T+V)(0)|`` and largest rise above it, J), ``energy_initial``/
         ``energy_final`` (T + V),
         ``finite`` and, on failure, ``error``.

@@ -1,6 +1,6 @@
 """Command line interface ``vjm`` (works without ROS).
 
-Subcommands: ``scenes``, ``run``, ``bench``, ``replay``, ``recover``. See DESIGN section 5.
+Subcommands: ``scenes``, ``run``, ``bench``, ``replay``, ``recover``. See docs/design.md section 5.
 
 Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
 running, a log path that cannot be written or a nearly full disk); 3 the simulation diverged (what

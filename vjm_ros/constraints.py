@@ -1,6 +1,6 @@
 """Loop closures: residuals ``C(q)``, Jacobians ``A = dC/dq``, and the two ways to enforce them.
 
-Rows (DESIGN section 2):
+Rows (docs/design.md section 2):
 
 * ``hinge``: ``C = Pa - Pb`` (2 rows, m);
 * ``slider``: ``C = (Pa - P0) . n_d`` with ``n_d = e_z x d`` the line normal (1 row, m); the line

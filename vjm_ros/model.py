@@ -1,7 +1,7 @@
 """Static description of a mechanism: chains of links, joints, closures and actuators.
 
 No dynamics here: this module only holds what a scene says, in arrays that the kinematics and
-dynamics read. Conventions follow DESIGN section 1:
+dynamics read. Conventions follow docs/design.md section 1:
 
 * a chain starts at a ground point ``O`` with ground angle ``theta1`` and ground length ``a1``;
 * moving link ``i`` follows joint ``i``; the joint sits at the end of the preceding link (or of the
@@ -133,7 +133,7 @@ class PointRef:
 
 @dataclass(frozen=True)
 class Closure:
-    """A loop-closing condition (DESIGN section 2).
+    """A loop-closing condition (docs/design.md section 2).
 
     Attributes
     ----------

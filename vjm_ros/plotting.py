@@ -1,4 +1,4 @@
-"""The thesis figure set of one run, as PNG files (DESIGN section 5, ``vjm run --plots``).
+"""The thesis figure set of one run, as PNG files (docs/design.md section 5, ``vjm run --plots``).
 
 Six figures, one per file, in the order of every example of thesis chapter 4:
 

@@ -656,7 +656,7 @@ class _Builder:
         return PointRef(li, local)
 
     def closures(self, value):
-        """The closures (DESIGN section 2)."""
+        """The closures (docs/design.md section 2)."""
         value = self.sequence(value, "closures", max_len=MAX_CLOSURES)
         out, names = [], set()
         for k, cl in enumerate(value):

@@ -1,7 +1,7 @@
 """The simulation loop without ROS: control ticks, closure settings, sampling, divergence guard.
 
 A control tick of length ``dt = 1 / rate`` holds the efforts constant and advances the physics by
-``substeps`` fixed steps (or one adaptive solve) to ``t + dt`` (DESIGN section 3).
+``substeps`` fixed steps (or one adaptive solve) to ``t + dt`` (docs/design.md section 3).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""In-memory trajectory of a run, its CSV table and its summary measures (DESIGN section 6).
+"""In-memory trajectory of a run, its CSV table and its summary measures (docs/design.md section 6).
 
-The columns of ``trajectory.csv`` are a contract (DESIGN section 5): ``t``; per joint
+The columns of ``trajectory.csv`` are a contract (docs/design.md section 5): ``t``; per joint
 ``q.<joint>``, ``qd.<joint>``, ``qdd.<joint>``, ``effort.<joint>``; per link ``theta.<link>``; per
 named point ``x.<point>``, ``y.<point>``; per closure ``f.<closure>.x``, ``f.<closure>.y`` (or
 ``f.<closure>.z`` for a torque); ``energy.kinetic``, ``energy.potential``, ``energy.constraint``,
@@ -92,7 +92,7 @@ class Trajectory:
         return err.max(axis=1) if err.shape[1] else np.zeros(len(self))
 
     def energy_drift(self) -> float:
-        """``max |(T+V)(t) - (T+V)(0)| / max T`` (dimensionless; DESIGN section 5)."""
+        """``max |(T+V)(t) - (T+V)(0)| / max T`` (dimensionless; docs/design.md section 5)."""
         e = self["energy"]
         if len(e) == 0:
             return 0.0
@@ -103,7 +103,7 @@ class Trajectory:
         return float(np.max(np.abs(tv - tv[0])) / scale)
 
     def energy_balance_residual(self) -> float:
-        """Largest deviation from the energy ledger of DESIGN section 2, J.
+        """Largest deviation from the energy ledger of docs/design.md section 2, J.
 
         ``E(t) - E(0) - integral(tau . qd - sum Kv Cdot^2) dt`` with the trapezoid rule over the
         samples, where ``E = T + V + sum 1/2 Kp C^2``.

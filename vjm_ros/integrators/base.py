@@ -1,7 +1,7 @@
 """Integrator contract.
 
 An integrator advances a :class:`~vjm_ros.system.Mechanism` over one control tick of length
-``dt`` with the efforts ``tau`` held constant (DESIGN section 3):
+``dt`` with the efforts ``tau`` held constant (docs/design.md section 3):
 
 1. ``advance(system, t, q, qd, tau, dt, substeps)`` returns ``(q, qd)`` at ``t + dt``;
 2. fixed-step methods take ``substeps`` equal steps ``h = dt / substeps``;

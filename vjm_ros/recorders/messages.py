@@ -4,7 +4,7 @@ The dicts have exactly the fields of the ROS 2 types (nested dicts, lists of flo
 layout serves the MCAP recorder (:mod:`vjm_ros.recorders.cdr` encodes them), the live node (copy
 them into rclpy messages) and tests. Nothing here imports ROS.
 
-Topics (DESIGN section 5), with ``<node>`` the node name (default ``vjm_sim_node``):
+Topics (docs/design.md section 5), with ``<node>`` the node name (default ``vjm_sim_node``):
 
 ==========================================  ==================================  =================
 topic                                       type                                rate

@@ -1,6 +1,6 @@
 """Effort commands between the ROS callbacks and the tick loop, without ROS.
 
-Rules (DESIGN section 5 and the node's documentation):
+Rules (docs/design.md section 5 and the node's documentation):
 
 * a command is one value per actuator in the scene's actuator order (``~/effort_commands``), or
   efforts matched by joint name (``~/joint_commands``; actuators not named keep their value);

@@ -4,7 +4,7 @@
 * late / missed ticks and resyncs: from :class:`~vjm_ros.ros.pacing.PacingStats`;
 * closure error: the largest ``|C|`` (m, rad for angle closures) in the window and since start;
 * smallest singular value of the closure Jacobian in the window (distance to a singular pose);
-* energy-balance residual (DESIGN section 2): ``E(t) - E(0) - integral(tau . qd - sum Kv Cdot^2)``
+* energy-balance residual (docs/design.md section 2): ``E(t) - E(0) - integral(tau . qd - sum Kv Cdot^2)``
   with the trapezoid rule over the observed samples, J. With a sample every tick it measures the
   integration error; with decimated samples it also carries the quadrature error.
 """
