@@ -39,6 +39,8 @@ setup(
             "hypothesis>=6.100",
             "ruff>=0.5",
             "rosbags>=0.11,<0.12",
+            # Holds the package's layering (docs/design.md section 7) in the test suite.
+            "import-linter>=2.16,<3",
         ],
         # MuJoCo side by side in `vjm bench`; 4.0.0 has a sparse-Cholesky bug fixed in 4.0.1.
         "compare": ["mujoco>=3.2,!=4.0.0"],
