@@ -38,7 +38,7 @@ NODE_CODES = {signal.SIGINT: {0, -signal.SIGINT}, signal.SIGTERM: {0, -signal.SI
 
 def command(kind, mcap, rrd):
     if kind == "cli":
-        return [sys.executable, "-m", "vjm_ros.cli", "run", "six_bar", "--duration", "30",
+        return [sys.executable, "-m", "vjm_ros.app.cli", "run", "six_bar", "--duration", "30",
                 "--mcap", str(mcap), "--rrd", str(rrd)]
     return [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args", "-p", "scene:=six_bar",
             "-p", "duration:=30.0", "-p", f"mcap:={mcap}", "-p", f"rrd:={rrd}"]
