@@ -10,7 +10,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
-    package_data={package_name: ["scenes/*.yaml"]},
+    package_data={"vjm_ros.scene": ["builtin/*.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -27,7 +27,7 @@ setup(
         "mcap>=1.4,<2",
         "mcap-ros2-support>=0.5,<1",
         "rerun-sdk>=0.41,<0.42",
-        # Compiled physics kernel (vjm_ros/_kernels.py): ~30x per evaluation. 0.64 is the first
+        # Compiled physics kernel (vjm_ros/core/kernels.py): ~30x per evaluation. 0.64 is the first
         # release whose requirements admit numpy 2.4; without numba the numpy reference is used.
         "numba>=0.64,<1",
     ],
@@ -54,7 +54,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "vjm = vjm_ros.cli:main",
+            "vjm = vjm_ros.app.cli:main",
             "vjm_sim_node = vjm_ros.ros.node:main",
             "vjm_pd_controller = vjm_ros.ros.controller:main",
         ],

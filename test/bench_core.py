@@ -13,7 +13,7 @@ Operations:
   ``advance`` as the simulator calls it (the kernel side uses the fused integrator);
 * ``simulator_tick``: one ``Simulator.advance()`` (the tick plus the divergence guard). Case
   ``numba_guard`` also reads the guard's closure errors from the kernel
-  (:meth:`vjm_ros.fast.FastMechanism.closure_errors`), as the simulator would with a fast
+  (:meth:`vjm_ros.core.compiled.FastMechanism.closure_errors`), as the simulator would with a fast
   mechanism; the reference guard evaluates the closures with numpy on every tick.
 """
 
@@ -22,13 +22,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vjm_ros.constraints import ExactClosure, PenaltyClosure
-from vjm_ros.errors import DivergenceError
-from vjm_ros.fast import HAVE_NUMBA, FastMechanism, fuse_integrator
-from vjm_ros.integrators import make_integrator
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.system import Mechanism
+from vjm_ros.core.compiled import HAVE_NUMBA, FastMechanism, fuse_integrator
+from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
+from vjm_ros.core.errors import DivergenceError
+from vjm_ros.core.integrators import make_integrator
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 pytestmark = [
     pytest.mark.bench,

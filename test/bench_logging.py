@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 from conftest import four_bar_samples
 
-from vjm_ros.recorders.rerun_recorder import RerunRecorder
+from vjm_ros.logs.rerun_recorder import RerunRecorder
 
 pytestmark = pytest.mark.bench
 

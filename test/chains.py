@@ -2,7 +2,7 @@
 
 The geometry here is written from docs/design.md section 1 alone, as a plain loop over each chain, and
 reads only the scene description (chains, links, joints); it never uses the index arrays that
-``Model.build`` derives nor anything in ``vjm_ros.kinematics``:
+``Model.build`` derives nor anything in ``vjm_ros.core.kinematics``:
 
     theta_1 = chain angle, O_1 = chain origin, a_1 = chain length
     O_(j+1) = O_j + a_j u(theta_j) + B_j n(theta_j)
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vjm_ros.model import GROUND, PRISMATIC, REVOLUTE, Chain, Joint, Link, Model
+from vjm_ros.core.model import GROUND, PRISMATIC, REVOLUTE, Chain, Joint, Link, Model
 
 
 def u(theta):

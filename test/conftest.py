@@ -20,8 +20,8 @@ def four_bar_samples(ticks):
 
     Returns ``(scene, simulator, samples)``, one sample per tick; shared by the log tests.
     """
-    from vjm_ros.scene import load_scene
-    from vjm_ros.simulator import SimulationSettings, Simulator
+    from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
     scene = load_scene("four_bar")
     sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)

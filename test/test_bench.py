@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from vjm_ros import bench, compare_mujoco
-from vjm_ros.bench import (
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.studies import bench, compare_mujoco
+from vjm_ros.studies.bench import (
     EXACT,
     THESIS,
     BenchOptions,
@@ -19,7 +20,6 @@ from vjm_ros.bench import (
     recommend,
     run_bench,
 )
-from vjm_ros.scene import load_scene
 
 
 def test_quick_cli_on_a_tiny_horizon(tmp_path):

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from vjm_ros.scene import builtin_scenes, load_scene
+from vjm_ros.scene.loader import builtin_scenes, load_scene
 
 SUMMARY_KEYS = {
     "scene",
@@ -31,7 +31,7 @@ SUMMARY_KEYS = {
 def vjm(*args, cwd=None):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     return subprocess.run(
-        [sys.executable, "-m", "vjm_ros.cli", *args],
+        [sys.executable, "-m", "vjm_ros.app.cli", *args],
         capture_output=True,
         text=True,
         timeout=300,

@@ -14,14 +14,14 @@ import chains as ch
 import numpy as np
 import pytest
 
-from vjm_ros.constraints import ClosureSet, ExactClosure, PenaltyClosure
-from vjm_ros.dynamics import bias_forces, mass_matrix
-from vjm_ros.errors import StiffnessError
-from vjm_ros.kinematics import forward_kinematics
-from vjm_ros.model import ANGLE, GROUND, HINGE, SLIDER, Closure, Model, PointRef
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.system import Mechanism
+from vjm_ros.core.constraints import ClosureSet, ExactClosure, PenaltyClosure
+from vjm_ros.core.dynamics import bias_forces, mass_matrix
+from vjm_ros.core.errors import StiffnessError
+from vjm_ros.core.kinematics import forward_kinematics
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.model import ANGLE, GROUND, HINGE, SLIDER, Closure, Model, PointRef
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 PIN = np.array([1.0, 0.0])  # ground point of the four-bar's tip pin, m (four_bar.yaml)
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.special import ellipk
 
-from vjm_ros.dynamics import (
+from vjm_ros.core.dynamics import (
     bias_forces,
     forward_dynamics,
     inverse_dynamics,
@@ -21,8 +21,8 @@ from vjm_ros.dynamics import (
     mass_matrix,
     potential_energy,
 )
-from vjm_ros.model import PRISMATIC, REVOLUTE, Actuator, Chain, Joint, Link, Model
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.core.model import PRISMATIC, REVOLUTE, Actuator, Chain, Joint, Link, Model
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 G = 9.81
 

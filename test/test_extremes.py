@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_ros.bench import chain_scene, long_run, star_scene
-from vjm_ros.errors import DivergenceError, SceneError, StiffnessError
-from vjm_ros.integrators import FIXED_STEP
-from vjm_ros.scene import builtin_scene_text, load_scene, parse_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.core.errors import DivergenceError, SceneError, StiffnessError
+from vjm_ros.core.integrators import FIXED_STEP
+from vjm_ros.scene.loader import builtin_scene_text, load_scene, parse_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
+from vjm_ros.studies.bench import chain_scene, long_run, star_scene
 
 G = 9.81
 
@@ -352,7 +352,7 @@ def test_guard_names_the_closure_among_several():
 
 def vjm(*args):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    return subprocess.run([sys.executable, "-m", "vjm_ros.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", *args], capture_output=True,
                           text=True, timeout=300, env=env)
 
 

@@ -1,4 +1,4 @@
-"""The compiled kernel (:mod:`vjm_ros.fast`) reproduces the numpy reference (:mod:`vjm_ros.system`).
+"""The compiled kernel (:mod:`vjm_ros.core.compiled`) reproduces the numpy reference (:mod:`vjm_ros.core.mechanism`).
 
 Tolerances. Both implementations evaluate the same formulas in double precision but sum in another
 order, factor ``M`` by LU with partial pivoting (LAPACK ``dgesv`` / a scalar loop) and diagonalize
@@ -31,8 +31,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vjm_ros.constraints import ExactClosure, PenaltyClosure
-from vjm_ros.fast import (
+from vjm_ros.core.compiled import (
     HAVE_NUMBA,
     FastEvaluation,
     FastMechanism,
@@ -43,10 +42,17 @@ from vjm_ros.fast import (
     fuse_integrator,
     make_mechanism,
 )
-from vjm_ros.integrators import make_integrator
-from vjm_ros.integrators.fixed import RK4, ExplicitEuler, ImplicitPenaltyEuler, SemiImplicitEuler
-from vjm_ros.kinematics import forward_kinematics
-from vjm_ros.model import (
+from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
+from vjm_ros.core.integrators import make_integrator
+from vjm_ros.core.integrators.fixed import (
+    RK4,
+    ExplicitEuler,
+    ImplicitPenaltyEuler,
+    SemiImplicitEuler,
+)
+from vjm_ros.core.kinematics import forward_kinematics
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.model import (
     ANGLE,
     GROUND,
     HINGE,
@@ -61,9 +67,8 @@ from vjm_ros.model import (
     Model,
     PointRef,
 )
-from vjm_ros.scene import builtin_scenes, load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.system import Mechanism
+from vjm_ros.scene.loader import builtin_scenes, load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
 
@@ -421,10 +426,10 @@ def test_kernel_without_compilation():
     """With numba's JIT disabled the kernel runs as plain Python and gives the same results."""
     script = (
         "import numpy as np\n"
-        "from vjm_ros.constraints import ExactClosure, PenaltyClosure\n"
-        "from vjm_ros.fast import FastMechanism, FusedRK4\n"
-        "from vjm_ros.scene import load_scene\n"
-        "from vjm_ros.system import Mechanism\n"
+        "from vjm_ros.core.constraints import ExactClosure, PenaltyClosure\n"
+        "from vjm_ros.core.compiled import FastMechanism, FusedRK4\n"
+        "from vjm_ros.scene.loader import load_scene\n"
+        "from vjm_ros.core.mechanism import Mechanism\n"
         "worst = 0.0\n"
         "for name in ('four_bar', 'rrr_platform', 'double_slider'):\n"
         "    m = load_scene(name).model\n"

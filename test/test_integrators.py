@@ -11,11 +11,11 @@ import chains as ch
 import numpy as np
 import pytest
 
-from vjm_ros.constraints import PenaltyClosure
-from vjm_ros.integrators import FIXED_STEP, INTEGRATORS, make_integrator
-from vjm_ros.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.system import Mechanism
+from vjm_ros.core.constraints import PenaltyClosure
+from vjm_ros.core.integrators import FIXED_STEP, INTEGRATORS, make_integrator
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 # --------------------------------------------------------------------------- energy
 

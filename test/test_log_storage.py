@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
-from vjm_ros.errors import ConfigurationError
-from vjm_ros.recorders import storage
-from vjm_ros.recorders.storage import LogWriters, check_log_path, is_file_target
-from vjm_ros.ros.commands import CommandBuffer
-from vjm_ros.ros.loop import DURATION, LoopOptions, TickLoop
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.logs import storage
+from vjm_ros.logs.storage import LogWriters, check_log_path, is_file_target
+from vjm_ros.realtime.commands import CommandBuffer
+from vjm_ros.realtime.loop import DURATION, LoopOptions, TickLoop
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 Usage = namedtuple("Usage", "total used free")
@@ -106,7 +106,7 @@ def test_log_writers_report_a_log_that_cannot_be_finalized():
 def test_vjm_run_with_a_disk_that_fills_up_keeps_its_other_outputs_and_exits_4(tmp_path):
     out = tmp_path / "out"
     proc = subprocess.run(
-        [sys.executable, "-m", "vjm_ros.cli", "run", "four_bar", "--duration", "0.5",
+        [sys.executable, "-m", "vjm_ros.app.cli", "run", "four_bar", "--duration", "0.5",
          "--mcap", "/dev/full", "--out", str(out), "--json"],
         cwd=ROOT, capture_output=True, text=True, timeout=120,
         env=dict(os.environ, PYTHONPATH=str(ROOT)))

@@ -16,10 +16,10 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from vjm_ros.recorders import Timebase, cdr, finalize_on_signals, messages, msgdefs
-from vjm_ros.recorders.mcap_recorder import McapRecorder
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.logs import Timebase, cdr, finalize_on_signals, messages, msgdefs
+from vjm_ros.logs.mcap_recorder import McapRecorder
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 REPO = Path(__file__).resolve().parents[1]
 RERUN = Path(sys.executable).with_name("rerun")
@@ -338,9 +338,9 @@ def test_a_signal_during_a_write_takes_effect_when_the_write_returns(run, tmp_pa
 
 WRITER = """
 import sys
-from vjm_ros.recorders import McapRecorder, finalize_on_signals
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.logs import McapRecorder, finalize_on_signals
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 scene = load_scene("four_bar")
 sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)

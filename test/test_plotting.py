@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from vjm_ros.plotting import (
+from vjm_ros.app.plotting import (
     FIGURE_NAMES,
     absolute_rates,
     chrono_cyclograph_figure,
@@ -16,9 +16,9 @@ from vjm_ros.plotting import (
     energy_figure,
     write_figures,
 )
-from vjm_ros.scene import builtin_scenes, load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.trajectory import Trajectory
+from vjm_ros.scene.loader import builtin_scenes, load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
+from vjm_ros.sim.trajectory import Trajectory
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

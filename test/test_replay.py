@@ -16,8 +16,8 @@ from conftest import four_bar_samples
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
-from vjm_ros.recorders.mcap_recorder import McapRecorder
-from vjm_ros.replay import read_info, recover, replay
+from vjm_ros.logs.mcap_recorder import McapRecorder
+from vjm_ros.logs.replay import read_info, recover, replay
 
 REPO = Path(__file__).resolve().parents[1]
 RERUN = Path(sys.executable).with_name("rerun")
@@ -159,9 +159,9 @@ def test_read_info_finds_scene_and_settings(log, tmp_path):
 
 WRITER = """
 import sys
-from vjm_ros.recorders import McapRecorder
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.logs import McapRecorder
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 scene = load_scene("four_bar")
 sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)

@@ -16,7 +16,7 @@ import pytest
 from conftest import four_bar_samples
 from rerun.chunk import RrdReader
 
-from vjm_ros.recorders.rerun_recorder import RerunRecorder, force_components
+from vjm_ros.logs.rerun_recorder import RerunRecorder, force_components
 
 RERUN = Path(sys.executable).with_name("rerun")
 TICKS = 400

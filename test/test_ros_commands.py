@@ -13,11 +13,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vjm_ros.errors import ConfigurationError, DivergenceError, SceneError, StiffnessError
-from vjm_ros.ros import commands as cmd
-from vjm_ros.ros.commands import CommandBuffer, Throttle
-from vjm_ros.ros.gate import Gate
-from vjm_ros.ros.loop import (
+from vjm_ros.core.errors import ConfigurationError, DivergenceError, SceneError, StiffnessError
+from vjm_ros.realtime import commands as cmd
+from vjm_ros.realtime.commands import CommandBuffer, Throttle
+from vjm_ros.realtime.gate import Gate
+from vjm_ros.realtime.loop import (
     DURATION,
     GATE_MIN_OPEN,
     GATE_OPEN_SHARE,
@@ -25,17 +25,17 @@ from vjm_ros.ros.loop import (
     LoopOptions,
     TickLoop,
 )
-from vjm_ros.ros.monitor import EnergyLedger, Monitor, assess
-from vjm_ros.ros.pacing import Pacer, PacingStats
-from vjm_ros.ros.settings import (
+from vjm_ros.realtime.monitor import EnergyLedger, Monitor, assess
+from vjm_ros.realtime.pacing import Pacer, PacingStats
+from vjm_ros.realtime.parameters import (
     PARAMETERS,
     NodeConfig,
     build_simulator,
     simulation_settings,
     ticks_between,
 )
-from vjm_ros.scene import load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 
 class FakeClock:

@@ -22,12 +22,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from vjm_ros.constraints import ExactClosure  # noqa: E402
+from vjm_ros.core.constraints import ExactClosure  # noqa: E402
+from vjm_ros.core.mechanism import Mechanism  # noqa: E402
 from vjm_ros.ros.controller import FiveBarGeometry, make_law, tip_position  # noqa: E402
 from vjm_ros.ros.conversions import joint_arrays, seconds  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
-from vjm_ros.scene import load_scene  # noqa: E402
-from vjm_ros.system import Mechanism  # noqa: E402
+from vjm_ros.scene.loader import load_scene  # noqa: E402
 
 DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,10 +17,10 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from vjm_ros.realtime.commands import CommandBuffer  # noqa: E402
 from vjm_ros.ros import flood  # noqa: E402
-from vjm_ros.ros.commands import CommandBuffer  # noqa: E402
 from vjm_ros.ros.node import WARNING_PERIOD  # noqa: E402
-from vjm_ros.scene import load_scene  # noqa: E402
+from vjm_ros.scene.loader import load_scene  # noqa: E402
 
 FLOOD_SECONDS = 10.0
 FLOOD_HZ = 10_000.0

@@ -43,8 +43,8 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.node import SimNode, run  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
-from vjm_ros.scene import load_scene  # noqa: E402
-from vjm_ros.simulator import SimulationSettings, Simulator  # noqa: E402
+from vjm_ros.scene.loader import load_scene  # noqa: E402
+from vjm_ros.sim.simulator import SimulationSettings, Simulator  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -191,7 +191,7 @@ def plain_simulator(scene_name, rate=1000.0):
 
 # ---------------------------------------------------------------- messages: live = log
 def fill(msg, values):
-    """A ROS message from the nested dict form of :mod:`vjm_ros.recorders.messages`."""
+    """A ROS message from the nested dict form of :mod:`vjm_ros.logs.messages`."""
     slots = msg.get_fields_and_field_types()
     for key, value in values.items():
         if isinstance(value, dict):
@@ -206,7 +206,7 @@ def fill(msg, values):
 
 
 def test_live_messages_equal_the_logged_ones():
-    from vjm_ros.recorders import messages as log
+    from vjm_ros.logs import messages as log
     from vjm_ros.ros import conversions as conv
 
     sim = plain_simulator("five_bar")
@@ -469,7 +469,7 @@ def test_parameters_are_validated_at_run_time(harness):
 def test_config_file_lists_every_parameter_with_a_valid_value():
     import yaml
 
-    from vjm_ros.ros.settings import PARAMETERS, NodeConfig
+    from vjm_ros.realtime.parameters import PARAMETERS, NodeConfig
 
     values = yaml.safe_load((ROOT / "config" / "sim_node.yaml").read_text())
     values = values["vjm_sim_node"]["ros__parameters"]

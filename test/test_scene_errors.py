@@ -17,8 +17,15 @@ import sys
 
 import pytest
 
-from vjm_ros.errors import SceneError
-from vjm_ros.scene import FILE_KEY, MAX_LINKS, MAX_NESTING, MAX_SCENE_BYTES, TOP_KEY, load_scene
+from vjm_ros.core.errors import SceneError
+from vjm_ros.scene.loader import (
+    FILE_KEY,
+    MAX_LINKS,
+    MAX_NESTING,
+    MAX_SCENE_BYTES,
+    TOP_KEY,
+    load_scene,
+)
 
 BASE = """\
 name: base
@@ -305,7 +312,7 @@ def test_cli_exits_2_naming_file_and_key(tmp_path, case):
     else:
         path.write_text(contents, encoding="utf-8")
     out = subprocess.run(
-        [sys.executable, "-m", "vjm_ros.cli", "run", str(path), "--duration", "0.01"],
+        [sys.executable, "-m", "vjm_ros.app.cli", "run", str(path), "--duration", "0.01"],
         capture_output=True,
         text=True,
         timeout=120,

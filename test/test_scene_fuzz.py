@@ -1,7 +1,7 @@
 """Scene fuzzing: whatever a scene file holds, loading it ends well and soon.
 
-Every generated file must load into a :class:`~vjm_ros.scene.Scene` or raise a
-:class:`~vjm_ros.errors.SceneError` that names the file and a key path, within ``CASE_SECONDS``
+Every generated file must load into a :class:`~vjm_ros.scene.loader.Scene` or raise a
+:class:`~vjm_ros.core.errors.SceneError` that names the file and a key path, within ``CASE_SECONDS``
 (measured per case, and enforced by an alarm so that a hang fails instead of stalling the run).
 The key path must name something real: a line and column inside the file, the file itself
 (``FILE_KEY``), the top level (``TOP_KEY``), or a path that exists in the document (its last part
@@ -37,8 +37,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vjm_ros.errors import SceneError
-from vjm_ros.scene import (
+from vjm_ros.core.errors import SceneError
+from vjm_ros.scene.loader import (
     FILE_KEY,
     MAX_LINKS,
     MAX_SCENE_BYTES,

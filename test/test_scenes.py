@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from vjm_ros.assembly import closure_residual
-from vjm_ros.kinematics import forward_kinematics, point_positions
-from vjm_ros.scene import builtin_scenes, load_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
+from vjm_ros.core.kinematics import forward_kinematics, point_positions
+from vjm_ros.scene.assembly import closure_residual
+from vjm_ros.scene.loader import builtin_scenes, load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 SCENES = builtin_scenes()
 

@@ -40,7 +40,7 @@ def command(kind, mcap, rrd):
     if kind == "cli":
         # 300 simulated s: far longer than the latest signal on any machine (30 s took 3 s here,
         # so a shorter run could end before its signal and exit 0)
-        return [sys.executable, "-m", "vjm_ros.cli", "run", "six_bar", "--duration", "300",
+        return [sys.executable, "-m", "vjm_ros.app.cli", "run", "six_bar", "--duration", "300",
                 "--mcap", str(mcap), "--rrd", str(rrd)]
     return [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args", "-p", "scene:=six_bar",
             "-p", "duration:=30.0", "-p", f"mcap:={mcap}", "-p", f"rrd:={rrd}"]

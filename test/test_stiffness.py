@@ -21,12 +21,12 @@ import chains as ch
 import numpy as np
 import pytest
 
-from vjm_ros.constraints import closure_mobility, penalty_modes
-from vjm_ros.errors import DivergenceError, StiffnessError
-from vjm_ros.integrators import make_integrator
-from vjm_ros.scene import load_scene, parse_scene
-from vjm_ros.simulator import SimulationSettings, Simulator
-from vjm_ros.system import Mechanism
+from vjm_ros.core.constraints import closure_mobility, penalty_modes
+from vjm_ros.core.errors import DivergenceError, StiffnessError
+from vjm_ros.core.integrators import make_integrator
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.scene.loader import load_scene, parse_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 RK4_REAL = 2.785293563405282  # root of |1 + z + z^2/2 + z^3/6 + z^4/24| = 1 on z < 0
 EXPLICIT = ("explicit_euler", "semi_implicit_euler", "rk4")

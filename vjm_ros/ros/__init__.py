@@ -1,12 +1,7 @@
-"""ROS 2 interface of vjm_ros: the simulator node and an example controller.
+"""ROS 2 interface of vjm_ros: the simulator node, the example controller and the measurement
+tools that run as ROS processes (``latency``, ``flood``). The only package that imports rclpy.
 
-Only :mod:`vjm_ros.ros.node`, :mod:`vjm_ros.ros.runtime`, :mod:`vjm_ros.ros.controller` and
-:mod:`vjm_ros.ros.latency` import rclpy. The logic they rely on is plain Python, testable without ROS:
-
-* :mod:`~vjm_ros.ros.commands`: effort command validation, hold, timeout and lockstep hand-over;
-* :mod:`~vjm_ros.ros.pacing`: the realtime deadline loop and its late/missed tick counts;
-* :mod:`~vjm_ros.ros.monitor`: the figures published on ``/diagnostics``;
-* :mod:`~vjm_ros.ros.settings`: the node's parameters, their ranges and validation;
-* :mod:`~vjm_ros.ros.loop`: the tick loop (commands, stepping, outputs, pause/step/reset);
-* :mod:`~vjm_ros.ros.conversions`: message <-> array conversions (message types, no rclpy).
+The logic the node relies on is plain Python in :mod:`vjm_ros.realtime` (tick loop, pacing,
+commands, gate, monitor, parameters), tested without ROS; :mod:`~vjm_ros.ros.conversions` turns
+arrays into messages (message types only, rclpy is not started).
 """

@@ -50,12 +50,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ..constraints import ExactClosure
-from ..fast import make_mechanism
-from ..kinematics import forward_kinematics
-from ..model import HINGE, Model
-from ..scene import load_scene
-from .conversions import joint_arrays, seconds
+from vjm_ros.core.compiled import make_mechanism
+from vjm_ros.core.constraints import ExactClosure
+from vjm_ros.core.kinematics import forward_kinematics
+from vjm_ros.core.model import HINGE, Model
+from vjm_ros.ros.conversions import joint_arrays, seconds
+from vjm_ros.scene.loader import load_scene
 
 # ---------------------------------------------------------------------------------------------
 # 1. Geometry: inverse kinematics of a five-bar (two two-link revolute chains sharing a tip pin)

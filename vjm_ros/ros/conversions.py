@@ -1,7 +1,7 @@
 """Conversions between ROS 2 messages and arrays (message types only; rclpy is not started).
 
 The per-tick messages are built field by field for speed; their layouts are those of
-:mod:`vjm_ros.recorders.messages`, so a live topic and its MCAP log carry the same data:
+:mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
 
 * ``/joint_states``: every joint in scene order; position (rad or m), velocity (rad/s or m/s),
   effort = the applied generalized effort (N m or N; zero on passive joints);
@@ -30,8 +30,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..recorders import messages as layouts
-from ..simulator import Sample
+from vjm_ros.logs import messages as layouts
+from vjm_ros.sim.simulator import Sample
 
 FRAME_ID = layouts.FRAME_ID
 
@@ -214,7 +214,7 @@ class TipTrace:
 def markers(sample: Sample, trace: Iterable[np.ndarray] = (), force_scale: float = FORCE_SCALE) -> MarkerArray:
     """``visualization_msgs/MarkerArray`` of the mechanism, frame ``world``.
 
-    The markers of :func:`vjm_ros.recorders.messages.markers` (``links``: a ``LINE_LIST`` of every
+    The markers of :func:`vjm_ros.logs.messages.markers` (``links``: a ``LINE_LIST`` of every
     link; ``joints``: a ``SPHERE_LIST`` of the link origins and named points; ``constraint_forces``:
     one ``ARROW`` per closure from its point along ``force_scale * (fx, fy)``), built directly for
     speed, plus one ``LINE_STRIP`` per chain tip in namespace ``tip_trace``.
@@ -256,7 +256,7 @@ def diagnostics(report: dict, level: int, message: str, t: float, name: str, har
     Parameters
     ----------
     report : dict
-        Name to number (see :meth:`vjm_ros.ros.monitor.Monitor.report`).
+        Name to number (see :meth:`vjm_ros.realtime.monitor.Monitor.report`).
     level : int
         0 OK, 1 WARN, 2 ERROR.
     message : str

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scene import load_scene
+from vjm_ros.scene.loader import load_scene
 
 VALID_ARRAY = "valid_array"
 CLAMPED_ARRAY = "clamped_array"
@@ -275,8 +275,8 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import JointState
 
-    from .latency import node_command
-    from .runtime import Spinner
+    from vjm_ros.ros.latency import node_command
+    from vjm_ros.ros.runtime import Spinner
 
     model = load_scene(scene).model
     actuated = [model.joint_names.index(a) for a in model.actuator_names]

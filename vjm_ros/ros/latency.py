@@ -3,7 +3,7 @@
 For each scene, with the node as a separate process (as users run it):
 
 1. **realtime**: ``seconds`` of realtime running at ``rate`` Hz. The node's exit summary gives the
-   late and missed ticks (see :mod:`vjm_ros.ros.pacing`). Meanwhile a probe node in this process
+   late and missed ticks (see :mod:`vjm_ros.realtime.pacing`). Meanwhile a probe node in this process
    publishes effort commands at random moments (every 20-60 ms, distinct small values) and times
    each from its publication to the first ``/joint_states`` whose effort equals it: the
    command-to-state latency (transport, the wait for the next tick, the tick, transport back).
@@ -35,9 +35,9 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ..scene import builtin_scenes, load_scene
-from .node import NODE_NAME
-from .runtime import Spinner
+from vjm_ros.ros.node import NODE_NAME
+from vjm_ros.ros.runtime import Spinner
+from vjm_ros.scene.loader import builtin_scenes, load_scene
 
 
 def node_command(scene: str, rate: float, duration: float, realtime: bool, extra: list[str]) -> list[str]:

@@ -5,7 +5,7 @@ Run it::
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST vjm_sim_node --ros-args -p scene:=five_bar -p duration:=5.0
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.ros.node --ros-args --params-file config/sim_node.yaml
 
-Parameters: :data:`vjm_ros.ros.settings.PARAMETERS` (each declared with its description and range;
+Parameters: :data:`vjm_ros.realtime.parameters.PARAMETERS` (each declared with its description and range;
 ``config/sim_node.yaml`` lists them all). Topics (``~`` is ``/vjm_sim_node``):
 
 ==============================  ========================================  =========================
@@ -34,7 +34,7 @@ A controller that starts with the simulator should be paired with ``-p wait_for_
 (the initial state is held, and republished, until its first command arrives) or with
 ``lockstep`` (every tick waits for its command).
 
-Threads: the tick loop (:class:`~vjm_ros.ros.loop.TickLoop`) owns the main thread; a background
+Threads: the tick loop (:class:`~vjm_ros.realtime.loop.TickLoop`) owns the main thread; a background
 thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the subscriptions and services.
 
 Exit codes:
@@ -74,16 +74,12 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from ..errors import ConfigurationError, DivergenceError, VjmError
-from ..recorders.storage import check_log_path, is_file_target
-from ..scene import Scene
-from ..simulator import Sample, Simulator
-from . import conversions as conv
-from .commands import CommandBuffer, Throttle, Verdict
-from .loop import LoopOptions, TickLoop
-from .monitor import ERROR, assess
-from .runtime import Spinner, StopOnSignals, raise_priority
-from .settings import (
+from vjm_ros.core.errors import ConfigurationError, DivergenceError, VjmError
+from vjm_ros.logs.storage import check_log_path, is_file_target
+from vjm_ros.realtime.commands import CommandBuffer, Throttle, Verdict
+from vjm_ros.realtime.loop import LoopOptions, TickLoop
+from vjm_ros.realtime.monitor import ERROR, assess
+from vjm_ros.realtime.parameters import (
     PARAMETERS,
     RESET,
     START,
@@ -93,6 +89,10 @@ from .settings import (
     check_rates,
     ticks_between,
 )
+from vjm_ros.ros import conversions as conv
+from vjm_ros.ros.runtime import Spinner, StopOnSignals, raise_priority
+from vjm_ros.scene.loader import Scene
+from vjm_ros.sim.simulator import Sample, Simulator
 
 NODE_NAME = "vjm_sim_node"
 EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3
@@ -108,7 +108,7 @@ NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning",
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    """ROS parameter descriptor of a :class:`~vjm_ros.ros.settings.ParamSpec`.
+    """ROS parameter descriptor of a :class:`~vjm_ros.realtime.parameters.ParamSpec`.
 
     Floating-point parameters also accept integers (``-p rate_hz:=500``).
     """
@@ -159,7 +159,7 @@ def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: 
             if not path:
                 continue
             try:
-                from .. import recorders as module
+                from vjm_ros import logs as module
 
                 cls = getattr(module, cls_name)
             except (ImportError, AttributeError) as exc:
@@ -185,7 +185,7 @@ class SimNode(Node):
     ----------
     context : rclpy.context.Context, optional
     parameter_overrides : list of rclpy.parameter.Parameter, optional
-        Values for the parameters of :data:`~vjm_ros.ros.settings.PARAMETERS`.
+        Values for the parameters of :data:`~vjm_ros.realtime.parameters.PARAMETERS`.
     node_name : str
     namespace : str, optional
 

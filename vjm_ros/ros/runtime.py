@@ -17,10 +17,10 @@ from typing import TYPE_CHECKING
 
 from rclpy.executors import ExternalShutdownException
 
-from .gate import Gate
+from vjm_ros.realtime.gate import Gate
 
 if TYPE_CHECKING:
-    from .loop import TickLoop
+    from vjm_ros.realtime.loop import TickLoop
 
 SPIN_TIMEOUT = 0.05
 """``spin_once`` timeout of the executor thread, s."""

@@ -1,0 +1,1 @@
+"""User-facing programs: the ``vjm`` command line and the thesis figure set."""

@@ -1,0 +1,390 @@
+"""Command line interface ``vjm`` (works without ROS).
+
+Subcommands: ``scenes``, ``run``, ``bench``, ``replay``, ``recover``. See docs/design.md section 5.
+
+Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
+running, a log path that cannot be written or a nearly full disk); 3 the simulation diverged (what
+was recorded up to then is written); 4 a log could not be written during the run (the run went on
+without it; see :mod:`vjm_ros.logs.storage`); 130 interrupted by SIGINT and 143 by SIGTERM
+(outputs recorded so far are written and log files finalized).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vjm_ros.core.errors import ConfigurationError, DivergenceError, SceneError, VjmError
+from vjm_ros.logs.storage import LogWriters
+
+DEFAULT_SCENE = "four_bar"
+EXIT_BAD_INPUT = 2
+EXIT_DIVERGED = 3
+EXIT_LOG_FAILED = 4
+
+
+class _StopRequest:
+    """SIGINT/SIGTERM during a run: the handler only records the signal, and the run loop stops
+    between two ticks, so that no log is interrupted in the middle of a write."""
+
+    def __init__(self) -> None:
+        self.code = 0
+
+    def __call__(self, signum, _frame) -> None:
+        self.code = 128 + signum
+
+
+class Progress:
+    """A one-line progress bar on stderr, shown only on a terminal for runs longer than ~2 s."""
+
+    def __init__(self, total: float, enabled: bool):
+        self.total = total
+        self.enabled = enabled
+        self.start = time.perf_counter()
+        self.last = 0.0
+        self.shown = False
+
+    def update(self, done: float) -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self.last < 0.2 or now - self.start < 2.0:
+            return
+        self.last = now
+        frac = min(done / self.total, 1.0) if self.total > 0 else 1.0
+        width = 30
+        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
+        eta = (now - self.start) * (1 - frac) / frac if frac > 0 else float("nan")
+        sys.stderr.write(f"\r[{bar}] {100 * frac:5.1f}%  sim {done:7.2f} s  eta {eta:5.0f} s")
+        sys.stderr.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def _parser() -> argparse.ArgumentParser:
+    from vjm_ros.core.integrators import INTEGRATORS
+
+    p = argparse.ArgumentParser(
+        prog="vjm", description="Planar closed-chain mechanisms by the virtual joint method."
+    )
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("scenes", help="list the built-in scenes")
+
+    r = sub.add_parser("run", help="simulate a scene and write its trajectory and measures")
+    r.add_argument(
+        "scene",
+        nargs="?",
+        default=DEFAULT_SCENE,
+        help=f"built-in scene name or YAML path (default: {DEFAULT_SCENE})",
+    )
+    r.add_argument("--duration", type=float, help="simulated seconds (scene default, else 10)")
+    r.add_argument(
+        "--rate", type=float, help="control ticks per second, Hz (scene default, else 1000)"
+    )
+    r.add_argument("--substeps", type=int, help="fixed steps per tick (scene default, else 1)")
+    r.add_argument("--integrator", choices=list(INTEGRATORS), help="time-stepping method")
+    r.add_argument("--closure", choices=["penalty", "exact"], help="closure method")
+    r.add_argument("--kp", type=float, help="penalty stiffness, N/m")
+    r.add_argument("--kv", type=float, help="penalty damping, N s/m")
+    r.add_argument("--omega-n", type=float, help="penalty natural frequency per row, rad/s")
+    r.add_argument("--zeta", type=float, help="penalty damping ratio per row")
+    r.add_argument("--alpha", type=float, help="Baumgarte velocity gain (exact), 1/s")
+    r.add_argument("--beta", type=float, help="Baumgarte position gain (exact), 1/s")
+    r.add_argument("--projection", action="store_true", help="exact: project q, qd each tick")
+    r.add_argument("--rtol", type=float, default=1e-9, help="adaptive integrators' rtol")
+    r.add_argument("--atol", type=float, default=1e-12, help="adaptive integrators' atol")
+    r.add_argument(
+        "--effort",
+        type=float,
+        nargs="+",
+        metavar="E",
+        help="constant actuator efforts in the scene's actuator order, N m or N",
+    )
+    r.add_argument(
+        "--kernel",
+        choices=["auto", "numba", "numpy"],
+        default="auto",
+        help="physics kernel: compiled (numba) or the numpy reference (default: auto)",
+    )
+    r.add_argument(
+        "--no-stiffness-check",
+        action="store_true",
+        help="run even if the penalty gains exceed the integrator's stability bound",
+    )
+    r.add_argument("--out", type=Path, help="directory for trajectory.csv and summary.json")
+    r.add_argument("--mcap", type=Path, help="write a ROS 2 MCAP log")
+    r.add_argument("--rrd", help="write a rerun recording (.rrd path, 'spawn' or 'connect')")
+    r.add_argument(
+        "--plots", action="store_true", help="write the thesis figure set (PNG) to --out"
+    )
+    r.add_argument("--json", action="store_true", help="print the summary as JSON on the last line")
+
+    b = sub.add_parser("bench", help="speed/accuracy study", add_help=False)
+    b.add_argument("rest", nargs=argparse.REMAINDER)
+    rp = sub.add_parser("replay", help="rerun recording from an MCAP log")
+    rp.add_argument("mcap", type=Path)
+    rp.add_argument("-o", "--output", type=Path, help="output .rrd (default: next to the log)")
+    rc = sub.add_parser("recover", help="readable copy of a truncated MCAP log")
+    rc.add_argument("mcap", type=Path)
+    rc.add_argument("-o", "--output", type=Path, required=True)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``vjm`` command."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["bench"]:
+        from vjm_ros.studies.bench import main as bench_main
+
+        return bench_main(argv[1:])
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "scenes":
+            return _cmd_scenes()
+        if args.command == "run":
+            return _cmd_run(args)
+        if args.command == "replay":
+            from vjm_ros.logs.replay import replay
+
+            out = args.output or args.mcap.with_suffix(".rrd")
+            info = _log_io(lambda: replay(args.mcap, out), args.mcap)
+            print(json.dumps({"rrd": str(out), **(info or {})}))
+            return 0
+        if args.command == "recover":
+            from vjm_ros.logs.replay import recover
+
+            count = _log_io(lambda: recover(args.mcap, args.output), args.mcap)
+            print(f"recovered {count} messages into {args.output}")
+            return 0
+    except (SceneError, ConfigurationError) as exc:
+        print(f"vjm: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except VjmError as exc:
+        print(f"vjm: error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _log_io(action, path: Path):
+    """Run a log read/write; turn I/O and format failures into a ConfigurationError."""
+    if not path.is_file():
+        raise ConfigurationError(f"{path}: expected an MCAP file, found no such file")
+    try:
+        return action()
+    except VjmError:
+        raise
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ConfigurationError(f"{path}: {exc}") from None
+
+
+def _cmd_scenes() -> int:
+    from vjm_ros.scene.loader import builtin_scenes, load_scene
+
+    for name in builtin_scenes():
+        sc = load_scene(name)
+        desc = " ".join(str(sc.model.extras.get("description", "")).split())
+        print(f"{name:16s} {sc.model.n:2d} joints, {len(sc.model.closures)} closures  {desc[:90]}")
+    return 0
+
+
+def _settings(args, scene):
+    from vjm_ros.sim.simulator import SimulationSettings
+
+    d, g = scene.defaults, scene.gains
+    closure = args.closure or g.get("method", "penalty")
+    raw = args.kp is not None or args.kv is not None
+    modal = args.omega_n is not None or args.zeta is not None
+    if raw and modal:
+        raise ConfigurationError("give either --kp/--kv or --omega-n/--zeta, not both")
+    if args.kv is not None and args.kp is None:
+        raise ConfigurationError("--kv needs --kp")
+    return SimulationSettings(
+        integrator=args.integrator or d.get("integrator", "rk4"),
+        closure=closure,
+        rate=args.rate if args.rate is not None else d.get("rate", 1000.0),
+        substeps=args.substeps if args.substeps is not None else d.get("substeps", 1),
+        kp=args.kp,
+        kv=args.kv if args.kv is not None else (0.0 if args.kp is not None else None),
+        omega_n=args.omega_n,
+        zeta=args.zeta if args.zeta is not None else (1.0 if args.omega_n is not None else None),
+        alpha=args.alpha if args.alpha is not None else g.get("alpha"),
+        beta=args.beta if args.beta is not None else g.get("beta"),
+        projection=bool(args.projection or g.get("projection", False)),
+        rtol=args.rtol,
+        atol=args.atol,
+        kernel=args.kernel,
+        check_stiffness=not args.no_stiffness_check,
+    )
+
+
+def _cmd_run(args) -> int:
+    from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.simulator import Simulator
+    from vjm_ros.sim.trajectory import Trajectory
+
+    scene = load_scene(args.scene)
+    settings = _settings(args, scene)
+    duration = args.duration if args.duration is not None else scene.defaults.get("duration", 10.0)
+    if not (np.isfinite(duration) and duration > 0):
+        raise ConfigurationError(
+            f"--duration: expected a positive number of seconds, found {duration}"
+        )
+    if args.plots and args.out is None:
+        raise ConfigurationError("--plots needs --out DIR")
+    sim = Simulator(scene.model, settings, scene.gains)
+    if args.effort is not None:
+        sim.set_efforts(np.array(args.effort))
+    elif scene.model.actuators:
+        sim.set_efforts(np.array([a.effort for a in scene.model.actuators]))
+    if args.out is not None:
+        _prepare_dir(args.out)
+
+    traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2)
+    ticks = int(round(duration * settings.rate))
+    progress = Progress(duration, sys.stderr.isatty() and sys.stdout.isatty())
+    stop = _StopRequest()
+    # Installed before any log is opened: from here on a signal ends the run between two ticks
+    # and every log is finalized.
+    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    code, error = 0, None
+    logs = None
+    wall0 = time.perf_counter()
+    try:
+        logs = LogWriters(_open_recorders(args, scene, sim, duration), _report_log_failure)
+        _record(traj, logs, sim.sample())
+        for _ in range(ticks):
+            if stop.code:
+                break
+            sim.advance()
+            _record(traj, logs, sim.sample())
+            progress.update(sim.t)
+    except DivergenceError as exc:
+        code, error = EXIT_DIVERGED, str(exc)
+    finally:
+        wall = time.perf_counter() - wall0
+        progress.close()
+        if logs is not None:
+            logs.close()
+        for s, h in old.items():
+            signal.signal(s, h)
+    if stop.code and not code:
+        code, error = stop.code, f"interrupted by signal {stop.code - 128}"
+    if logs is not None and logs.failed and not code:
+        code = EXIT_LOG_FAILED
+        error = "; ".join(f"log {where} could not be written ({why})" for where, why in logs.failed)
+    summary = traj.summary(_run_info(sim, wall))
+    if error:
+        summary["error"] = error
+        summary["finite"] = bool(summary["finite"] and code != EXIT_DIVERGED)
+    if args.out is not None:
+        traj.write_csv(args.out / "trajectory.csv")
+        (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        if args.plots and len(traj) > 1:
+            from vjm_ros.app.plotting import write_figures
+
+            write_figures(traj, args.out)
+    if error:
+        print(f"vjm: {error}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_summary(summary)
+    return code
+
+
+def _prepare_dir(path: Path) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".vjm_write_test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigurationError(
+            f"--out {path}: expected a writable directory ({exc.strerror or exc})"
+        ) from None
+
+
+def _open_recorders(args, scene, sim, duration: float) -> list:
+    from vjm_ros.logs.storage import check_log_path, is_file_target
+
+    for key, target in (("--mcap", args.mcap), ("--rrd", args.rrd)):
+        if target is not None and is_file_target(target):
+            check_log_path(target, key, duration, sim.settings.rate)
+    recorders = []
+    try:
+        if args.mcap is not None:
+            from vjm_ros.logs.mcap_recorder import McapRecorder
+
+            recorders.append(McapRecorder(args.mcap, scene.model, sim.describe(), scene.text))
+        if args.rrd is not None:
+            from vjm_ros.logs.rerun_recorder import RerunRecorder
+
+            recorders.append(RerunRecorder(args.rrd, scene.model, sim.describe()))
+    except (OSError, RuntimeError, ValueError) as exc:
+        for rec in recorders:
+            rec.close()
+        raise ConfigurationError(f"cannot open log file: {exc}") from None
+    return recorders
+
+
+def _record(traj, logs, sample) -> None:
+    traj.append(sample)
+    logs.write(sample)
+
+
+def _report_log_failure(where: str, why: str) -> None:
+    print(f"vjm: log {where} could not be written ({why}); recording to it stopped, the run "
+          "goes on", file=sys.stderr)
+
+
+def _run_info(sim, wall: float) -> dict:
+    info = sim.describe()
+    steps = sim.ticks * (sim.settings.substeps if sim.integrator.fixed_step else 1)
+    info.update(
+        {
+            "wall_time": wall,
+            "ticks": sim.ticks,
+            "steps": steps,
+            "realtime_factor": (sim.t / wall) if wall > 0 else float("inf"),
+            "evaluations": sim.mechanism.evaluations,
+        }
+    )
+    return info
+
+
+def _print_summary(summary: dict) -> None:
+    keys = [
+        "scene",
+        "integrator",
+        "closure",
+        "rate",
+        "substeps",
+        "sim_time",
+        "wall_time",
+        "steps",
+        "realtime_factor",
+        "max_closure_error",
+        "rms_closure_error",
+        "energy_drift",
+        "energy_balance_residual",
+        "finite",
+    ]
+    for k in keys:
+        v = summary.get(k)
+        if isinstance(v, float):
+            v = f"{v:.6g}"
+        print(f"{k:24s} {v}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,742 @@
+"""Compiled kernels behind :class:`vjm_ros.core.compiled.FastMechanism`.
+
+The same physics as :mod:`vjm_ros.core.kinematics`, :mod:`vjm_ros.core.dynamics`, :mod:`vjm_ros.core.constraints`
+and :mod:`vjm_ros.core.mechanism`, written as scalar loops over the links so that numba compiles them to
+machine code (``cache=True``: compiled once per machine, then loaded from the cache). Without numba
+the same functions run as plain Python, which is correct but slow.
+
+Recursions (docs/design.md section 1), link ``i`` after link ``i - 1`` of its chain, or after the chain's
+ground link when it is the first one:
+
+* ``theta_pred_i = theta_(i-1)`` and ``theta_i = theta_pred_i + phi_i``;
+* ``d_i = a_pred u(theta_pred_i) + B_i n(theta_pred_i)`` and ``O_i = O_(i-1) + d_i``;
+* ``v_i = v_(i-1) + omega_pred e_z x d_i + Bdot_i n(theta_pred_i)``;
+* ``a_i = a_(i-1) - omega_pred^2 d_i - 2 omega_pred Bdot_i u(theta_pred_i)`` (at ``qdd = 0``).
+
+A point ``P`` on link ``i`` moves with joint ``k`` of the same chain (``k <= i``) as
+``e_z x (P - O_k)`` (revolute) or ``n(theta_pred_k)`` (prismatic). The mass matrix is
+``sum_i m_i J_i^T J_i + I_i Jw_i^T Jw_i``, the bias ``sum_i J_i^T m_i (Jdot_i qdot - g)``.
+
+Everything is reached through one compiled entry point, :func:`run`, so that numba compiles the
+physics once (a few seconds on first use, then loaded from its cache in a fraction of a second).
+
+Model and method arrays (built by :func:`vjm_ros.core.compiled.pack_model` and
+:func:`vjm_ros.core.compiled.pack_method`):
+
+* ``lint`` int64 (n, 3): revolute flag, first-of-chain flag, index of the chain's first link;
+* ``lflt`` float64 (n, 10): base angle (rad), base origin x, y (m), predecessor length (m), locked
+  angle (rad), locked slide (m), mass (kg), inertia (kg m^2), mass-centre offsets ``p``, ``q`` (m);
+* ``cint`` int64 (k, 4): closure kind (:data:`HINGE`, :data:`SLIDER`, :data:`ANGLE`), link of
+  ``Pa``, link of the target (``-1``: ground), first row;
+* ``cflt`` float64 (k, 7): local ``(s, w)`` of ``Pa`` and of the target (m), line direction,
+  angle offset (rad);
+* ``gains`` float64 (r, 2): penalty ``Kp``, ``Kv`` per row (ignored by the exact method);
+* ``par`` float64 (6,): method (0 penalty, 1 exact), Baumgarte ``alpha``, ``beta`` (1/s),
+  ``rcond``, gravity ``gx``, ``gy`` (m/s^2).
+
+Output buffers (columns named by the ``K_*``, ``C_*`` and ``R_*`` constants):
+
+* ``kin`` (n + 1, 15): per link ``theta``, ``cos``, ``sin``, origin, ``omega``, origin velocity and
+  bias acceleration, then ``cos``/``sin`` of the predecessor angle, the slide ``B``, the
+  predecessor's ``omega`` and the slide rate; the last row is the ground;
+* ``mm`` (n, n), ``bias`` (n,): ``M`` and ``b`` with ``M qdd + b = tau``;
+* ``cm`` (n, 4): mass centres (m) and their velocities (m/s);
+* ``crow`` (r, 7): ``C``, ``Cdot``, ``Adot qd``, row force (N or N m), world-frame force direction
+  ``(Fx, Fy, Mz)`` of a unit row force;
+* ``jac`` (r, n): ``A``; ``points`` (k, 2): application point ``Pa`` of each closure, m.
+
+:func:`run` returns a status: 0 on success, 1 when a matrix was exactly singular (the case in which
+``numpy.linalg.solve`` raises ``LinAlgError``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:  # numba is optional: without it the kernels run as plain Python
+    from numba import njit as _njit
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    HAVE_NUMBA = False
+
+
+def _jit(fn):
+    """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged."""
+    if HAVE_NUMBA:
+        return _njit(cache=True, nogil=True, error_model="numpy")(fn)
+    return fn
+
+
+HINGE = 0
+SLIDER = 1
+ANGLE = 2
+
+PENALTY = 0
+EXACT = 1
+
+# operations of run()
+EXPLICIT_EULER = 0
+SEMI_IMPLICIT_EULER = 1
+RK4 = 2
+IMPLICIT_EULER = 3
+EVALUATE = 4
+IMPLICIT_VELOCITY = 5
+RESIDUAL = 6
+PROJECT = 7
+
+B16 = 1.0 / 6.0
+B13 = 1.0 / 3.0
+
+# columns of lint
+L_REV, L_FIRST, L_START = 0, 1, 2
+# columns of lflt
+F_BASE_ANGLE, F_BASE_X, F_BASE_Y, F_PRED_LEN, F_LOCK_ANGLE, F_LOCK_SLIDE = 0, 1, 2, 3, 4, 5
+F_MASS, F_INERTIA, F_COM_P, F_COM_Q = 6, 7, 8, 9
+N_LFLT = 10
+# entries of par
+P_METHOD, P_ALPHA, P_BETA, P_RCOND, P_GX, P_GY = 0, 1, 2, 3, 4, 5
+N_PAR = 6
+# columns of kin
+K_THETA, K_COS, K_SIN, K_OX, K_OY, K_OMEGA, K_VX, K_VY, K_AX, K_AY = range(10)
+K_PCOS, K_PSIN, K_SLIDE, K_POMEGA, K_SLIDE_RATE = range(10, 15)
+N_KIN = 15
+# columns of cm
+C_X, C_Y, C_VX, C_VY = range(4)
+N_CM = 4
+# columns of crow
+R_RES, R_RATE, R_BIAS, R_FORCE, R_DX, R_DY, R_DZ = range(7)
+N_CROW = 7
+
+
+# ---------------------------------------------------------------------------------- geometry
+@_jit
+def point_motion(kin, link, s, w):
+    """Position, velocity and bias acceleration of the point ``(s, w)`` of ``link``.
+
+    Returns
+    -------
+    tuple of float
+        ``px, py`` (m), ``vx, vy`` (m/s), ``ax, ay`` (m/s^2). ``link = -1`` is the ground:
+        ``(s, w)`` is then the world position.
+    """
+    if link < 0:
+        return s, w, 0.0, 0.0, 0.0, 0.0
+    c = kin[link, K_COS]
+    sn = kin[link, K_SIN]
+    rx = c * s - sn * w
+    ry = sn * s + c * w
+    om = kin[link, K_OMEGA]
+    return (
+        kin[link, K_OX] + rx,
+        kin[link, K_OY] + ry,
+        kin[link, K_VX] - om * ry,
+        kin[link, K_VY] + om * rx,
+        kin[link, K_AX] - om * om * rx,
+        kin[link, K_AY] - om * om * ry,
+    )
+
+
+@_jit
+def add_point_jacobian(jac, row, cx, cy, link, px, py, lint, kin):
+    """Add ``cx dPx/dq + cy dPy/dq`` of the point ``P = (px, py)`` of ``link`` to ``jac[row]``.
+
+    Nothing is added for the ground (``link = -1``).
+    """
+    if link < 0:
+        return
+    for k in range(lint[link, L_START], link + 1):
+        if lint[k, L_REV] == 1:
+            jx = -(py - kin[k, K_OY])
+            jy = px - kin[k, K_OX]
+        else:
+            jx = -kin[k, K_PSIN]
+            jy = kin[k, K_PCOS]
+        jac[row, k] += cx * jx + cy * jy
+
+
+@_jit
+def add_angle_jacobian(jac, row, sign, link, lint):
+    """Add ``sign * d theta_link / dq`` to ``jac[row]`` (nothing for the ground)."""
+    if link < 0:
+        return
+    for k in range(lint[link, L_START], link + 1):
+        if lint[k, L_REV] == 1:
+            jac[row, k] += sign
+
+
+@_jit
+def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, crow, jac,
+          points):
+    """Kinematics, dynamics and closure rows at ``(q, qd)`` into the output buffers.
+
+    With ``with_dynamics`` False only ``kin`` and the residual, rate and direction columns of
+    ``crow`` are filled (``M``, ``b``, ``A`` and ``Adot qd`` are skipped).
+    """
+    n = q.shape[0]
+    # chain recursion
+    for i in range(n):
+        if lint[i, L_FIRST] == 1:
+            tp = lflt[i, F_BASE_ANGLE]
+            ox = lflt[i, F_BASE_X]
+            oy = lflt[i, F_BASE_Y]
+            wp = 0.0
+            vx = 0.0
+            vy = 0.0
+            ax = 0.0
+            ay = 0.0
+        else:
+            tp = kin[i - 1, K_THETA]
+            ox = kin[i - 1, K_OX]
+            oy = kin[i - 1, K_OY]
+            wp = kin[i - 1, K_OMEGA]
+            vx = kin[i - 1, K_VX]
+            vy = kin[i - 1, K_VY]
+            ax = kin[i - 1, K_AX]
+            ay = kin[i - 1, K_AY]
+        if lint[i, L_REV] == 1:
+            phi = q[i]
+            b = lflt[i, F_LOCK_SLIDE]
+            phid = qd[i]
+            bd = 0.0
+        else:
+            phi = lflt[i, F_LOCK_ANGLE]
+            b = q[i]
+            phid = 0.0
+            bd = qd[i]
+        cp = math.cos(tp)
+        sp = math.sin(tp)
+        a = lflt[i, F_PRED_LEN]
+        dx = a * cp - b * sp
+        dy = a * sp + b * cp
+        t = tp + phi
+        kin[i, K_THETA] = t
+        kin[i, K_COS] = math.cos(t)
+        kin[i, K_SIN] = math.sin(t)
+        kin[i, K_OX] = ox + dx
+        kin[i, K_OY] = oy + dy
+        kin[i, K_OMEGA] = wp + phid
+        kin[i, K_VX] = vx - wp * dy - bd * sp
+        kin[i, K_VY] = vy + wp * dx + bd * cp
+        kin[i, K_AX] = ax - wp * wp * dx - 2.0 * wp * bd * cp
+        kin[i, K_AY] = ay - wp * wp * dy - 2.0 * wp * bd * sp
+        kin[i, K_PCOS] = cp
+        kin[i, K_PSIN] = sp
+        kin[i, K_SLIDE] = b
+        kin[i, K_POMEGA] = wp
+        kin[i, K_SLIDE_RATE] = bd
+    for j in range(N_KIN):
+        kin[n, j] = 0.0
+    kin[n, K_COS] = 1.0
+
+    # mass matrix and bias: sum over links of m J^T J + I Jw^T Jw and J^T m (Jdot qd - g)
+    if with_dynamics:
+        for k in range(n):
+            bias[k] = 0.0
+            for j in range(n):
+                mm[k, j] = 0.0
+        for i in range(n):
+            cx, cy, vcx, vcy, acx, acy = point_motion(kin, i, lflt[i, F_COM_P], lflt[i, F_COM_Q])
+            cm[i, C_X] = cx
+            cm[i, C_Y] = cy
+            cm[i, C_VX] = vcx
+            cm[i, C_VY] = vcy
+            m = lflt[i, F_MASS]
+            inertia = lflt[i, F_INERTIA]
+            fx = m * (acx - par[P_GX])
+            fy = m * (acy - par[P_GY])
+            start = lint[i, L_START]
+            for k in range(start, i + 1):
+                if lint[k, L_REV] == 1:
+                    jxk = -(cy - kin[k, K_OY])
+                    jyk = cx - kin[k, K_OX]
+                else:
+                    jxk = -kin[k, K_PSIN]
+                    jyk = kin[k, K_PCOS]
+                bias[k] += jxk * fx + jyk * fy
+                for j in range(start, k + 1):
+                    if lint[j, L_REV] == 1:
+                        jxj = -(cy - kin[j, K_OY])
+                        jyj = cx - kin[j, K_OX]
+                    else:
+                        jxj = -kin[j, K_PSIN]
+                        jyj = kin[j, K_PCOS]
+                    v = m * (jxk * jxj + jyk * jyj)
+                    if lint[k, L_REV] == 1 and lint[j, L_REV] == 1:
+                        v += inertia
+                    mm[k, j] += v
+        for k in range(n):
+            for j in range(k + 1, n):
+                mm[k, j] = mm[j, k]
+
+    # closure rows
+    r = crow.shape[0]
+    for i in range(r):
+        for j in range(N_CROW):
+            crow[i, j] = 0.0
+        for j in range(n):
+            jac[i, j] = 0.0
+    for c in range(cint.shape[0]):
+        kind = cint[c, 0]
+        la = cint[c, 1]
+        lb = cint[c, 2]
+        row = cint[c, 3]
+        pax, pay, vax, vay, aax, aay = point_motion(kin, la, cflt[c, 0], cflt[c, 1])
+        pbx, pby, vbx, vby, abx, aby = point_motion(kin, lb, cflt[c, 2], cflt[c, 3])
+        points[c, 0] = pax
+        points[c, 1] = pay
+        if kind == HINGE:
+            crow[row, R_RES] = pax - pbx
+            crow[row + 1, R_RES] = pay - pby
+            crow[row, R_RATE] = vax - vbx
+            crow[row + 1, R_RATE] = vay - vby
+            crow[row, R_DX] = 1.0
+            crow[row + 1, R_DY] = 1.0
+            if with_dynamics:
+                add_point_jacobian(jac, row, 1.0, 0.0, la, pax, pay, lint, kin)
+                add_point_jacobian(jac, row, -1.0, 0.0, lb, pbx, pby, lint, kin)
+                add_point_jacobian(jac, row + 1, 0.0, 1.0, la, pax, pay, lint, kin)
+                add_point_jacobian(jac, row + 1, 0.0, -1.0, lb, pbx, pby, lint, kin)
+                crow[row, R_BIAS] = aax - abx
+                crow[row + 1, R_BIAS] = aay - aby
+        elif kind == SLIDER:
+            # line through Pb with direction d (turning with link lb), normal nd = e_z x d
+            if lb < 0:
+                c0 = 1.0
+                s0 = 0.0
+                w = 0.0
+            else:
+                c0 = kin[lb, K_COS]
+                s0 = kin[lb, K_SIN]
+                w = kin[lb, K_OMEGA]
+            dx = c0 * cflt[c, 4] - s0 * cflt[c, 5]
+            dy = s0 * cflt[c, 4] + c0 * cflt[c, 5]
+            nx = -dy
+            ny = dx
+            px = pax - pbx
+            py = pay - pby
+            vx = vax - vbx
+            vy = vay - vby
+            along = px * dx + py * dy
+            res = px * nx + py * ny
+            crow[row, R_RES] = res
+            crow[row, R_RATE] = (vx * nx + vy * ny) - w * along
+            crow[row, R_DX] = nx
+            crow[row, R_DY] = ny
+            if with_dynamics:
+                add_point_jacobian(jac, row, nx, ny, la, pax, pay, lint, kin)
+                add_point_jacobian(jac, row, -nx, -ny, lb, pbx, pby, lint, kin)
+                add_angle_jacobian(jac, row, -along, lb, lint)
+                crow[row, R_BIAS] = (
+                    ((aax - abx) * nx + (aay - aby) * ny)
+                    - 2.0 * w * (vx * dx + vy * dy)
+                    - w * w * res
+                )
+        else:
+            diff = kin[la, K_THETA] - kin[lb, K_THETA] - cflt[c, 6]
+            crow[row, R_RES] = (diff + math.pi) % (2.0 * math.pi) - math.pi
+            crow[row, R_RATE] = kin[la, K_OMEGA] - kin[lb, K_OMEGA]
+            crow[row, R_DZ] = 1.0
+            if with_dynamics:
+                add_angle_jacobian(jac, row, 1.0, la, lint)
+                add_angle_jacobian(jac, row, -1.0, lb, lint)
+
+
+# ---------------------------------------------------------------------------------- linear algebra
+@_jit
+def lu_factor(a, piv):
+    """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``).
+
+    Returns
+    -------
+    int
+        0, or 1 when a pivot is exactly zero (singular matrix).
+    """
+    n = a.shape[0]
+    status = 0
+    for k in range(n):
+        p = k
+        big = abs(a[k, k])
+        for i in range(k + 1, n):
+            v = abs(a[i, k])
+            if v > big:
+                big = v
+                p = i
+        piv[k] = p
+        if p != k:
+            for j in range(n):
+                t = a[k, j]
+                a[k, j] = a[p, j]
+                a[p, j] = t
+        d = a[k, k]
+        if d == 0.0:
+            status = 1
+            continue
+        inv = 1.0 / d
+        for i in range(k + 1, n):
+            a[i, k] *= inv
+            f = a[i, k]
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    a[i, j] -= f * a[k, j]
+    return status
+
+
+@_jit
+def lu_solve(a, piv, b):
+    """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor`'s output."""
+    n = a.shape[0]
+    for k in range(n):
+        p = piv[k]
+        if p != k:
+            t = b[k]
+            b[k] = b[p]
+            b[p] = t
+    for i in range(n):
+        s = b[i]
+        for j in range(i):
+            s -= a[i, j] * b[j]
+        b[i] = s
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for j in range(i + 1, n):
+            s -= a[i, j] * b[j]
+        b[i] = s / a[i, i]
+
+
+@_jit
+def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec):
+    """``M^-1 A^T lambda`` with ``lambda`` the minimum-norm solution of ``A M^-1 A^T lambda = c``.
+
+    ``A M^-1 A^T`` (symmetric positive semi-definite) is diagonalized by cyclic Jacobi rotations
+    (its lower triangle is read, as LAPACK's ``dsyevd`` with ``UPLO='L'``); eigenvalues below
+    ``rcond * max eigenvalue`` count as zero, as in :func:`vjm_ros.core.constraints.solve_multipliers`,
+    so a rank-deficient ``A`` gets no multiplier along the directions it does not constrain.
+
+    Parameters
+    ----------
+    lu, piv : ndarray
+        LU factors of ``M`` (:func:`lu_factor`).
+    jac : ndarray, shape (r, n)
+    c : ndarray, shape (r,)
+    rcond : float
+    out : ndarray, shape (n,)
+        Out: ``M^-1 A^T lambda``.
+    minv_at : ndarray, shape (n, r)
+        Scratch: ``M^-1 A^T``.
+    g, v : ndarray, shape (r, r)
+        Scratch: ``G``, eigenvectors.
+    vec : ndarray, shape (3, max(n, r))
+        Scratch; on return ``vec[0, :r]`` holds ``lambda``.
+    """
+    n = lu.shape[0]
+    r = c.shape[0]
+    col = vec[1]
+    for i in range(r):
+        for j in range(n):
+            col[j] = jac[i, j]
+        lu_solve(lu, piv, col[:n])
+        for j in range(n):
+            minv_at[j, i] = col[j]
+    for i in range(r):
+        for k in range(i + 1):
+            s = 0.0
+            for j in range(n):
+                s += jac[i, j] * minv_at[j, k]
+            g[i, k] = s
+            g[k, i] = s
+        for k in range(r):
+            v[i, k] = 0.0
+        v[i, i] = 1.0
+    # cyclic Jacobi; an off-diagonal entry below eps ||G||_F is set to zero (a change within the
+    # round-off of G itself), so the sweeps end once every entry is at that level
+    for _sweep in range(50):
+        fro = 0.0
+        for i in range(r):
+            for j in range(r):
+                fro += g[i, j] * g[i, j]
+        tiny = 2.220446049250313e-16 * math.sqrt(fro)
+        rotated = False
+        for p in range(r - 1):
+            for qq in range(p + 1, r):
+                apq = g[p, qq]
+                if not abs(apq) > tiny:
+                    g[p, qq] = 0.0
+                    g[qq, p] = 0.0
+                    continue
+                rotated = True
+                tau = (g[qq, qq] - g[p, p]) / (2.0 * apq)
+                if tau >= 0.0:
+                    t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+                else:
+                    t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+                cr = 1.0 / math.sqrt(1.0 + t * t)
+                sr = t * cr
+                for k in range(r):
+                    gkp = g[k, p]
+                    gkq = g[k, qq]
+                    g[k, p] = cr * gkp - sr * gkq
+                    g[k, qq] = sr * gkp + cr * gkq
+                for k in range(r):
+                    gpk = g[p, k]
+                    gqk = g[qq, k]
+                    g[p, k] = cr * gpk - sr * gqk
+                    g[qq, k] = sr * gpk + cr * gqk
+                g[p, qq] = 0.0
+                g[qq, p] = 0.0
+                for k in range(r):
+                    vkp = v[k, p]
+                    vkq = v[k, qq]
+                    v[k, p] = cr * vkp - sr * vkq
+                    v[k, qq] = sr * vkp + cr * vkq
+        if not rotated:
+            break
+    wmax = g[0, 0]
+    for i in range(1, r):
+        wmax = max(wmax, g[i, i])
+    cut = rcond * max(wmax, 1e-300)
+    coef = vec[2]
+    for i in range(r):
+        if g[i, i] > cut:
+            s = 0.0
+            for k in range(r):
+                s += v[k, i] * c[k]
+            coef[i] = s / g[i, i]
+        else:
+            coef[i] = 0.0
+    lam = vec[0]
+    for k in range(r):
+        s = 0.0
+        for i in range(r):
+            s += v[k, i] * coef[i]
+        lam[k] = s
+    for j in range(n):
+        s = 0.0
+        for i in range(r):
+            s += minv_at[j, i] * lam[i]
+        out[j] = s
+
+
+# ---------------------------------------------------------------------------------- entry point
+@_jit
+def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
+        kin, mm, bias, cm, crow, jac, points, out_a, out_b):
+    """The one compiled entry point.
+
+    Parameters
+    ----------
+    op : int
+        What to do:
+
+        * :data:`EVALUATE`: every term at ``(q0, qd0)``; ``out_a = qdd``; the ground row of
+          ``kin`` receives the kinetic, potential and penalty energy (J) in columns
+          :data:`K_PCOS`, :data:`K_PSIN`, :data:`K_SLIDE`;
+        * :data:`IMPLICIT_VELOCITY`: ``out_a = v``, the velocity after a step of length ``h``
+          implicit in the penalty forces (``qd0 + h qdd`` for exact closures);
+        * :data:`EXPLICIT_EULER`, :data:`SEMI_IMPLICIT_EULER`, :data:`RK4`,
+          :data:`IMPLICIT_EULER`: ``steps`` steps of length ``h`` of that integrator
+          (:mod:`vjm_ros.core.integrators.fixed`); ``(out_a, out_b) = (q, qd)`` at the end;
+        * :data:`RESIDUAL`: closure residuals at ``q0`` with zero rates, no Jacobian (in ``crow``);
+        * :data:`PROJECT`: ``(out_a, out_b) = (q, qd)`` projected onto the closure manifold, the
+          algorithm of
+          :meth:`vjm_ros.core.mechanism.Mechanism.project` (at most ``steps`` Gauss-Newton steps in the
+          metric of ``M`` until ``max |C| <= tol``, then one velocity projection,
+          ``rcond = 1e-10``).
+    q0, qd0, tau : ndarray, shape (n,)
+        State (rad or m, rad/s or m/s) and efforts (N m or N); not modified.
+    h : float
+        Step, s.
+    steps : int
+    tol : float
+        Projection tolerance, m or rad.
+    lint, lflt, cint, cflt, gains, par : ndarray
+        Model and method arrays (module docstring).
+    kin, mm, bias, cm, crow, jac, points : ndarray
+        Output buffers (module docstring); they hold the terms of the last evaluation on return.
+    out_a, out_b : ndarray, shape (n,)
+        Outputs, as listed under ``op``.
+
+    Returns
+    -------
+    int
+        0, or 1 when a matrix was exactly singular.
+    """
+    n = q0.shape[0]
+    r = crow.shape[0]
+    m = max(n, r)
+    lu = np.empty((n, n))
+    piv = np.empty(n, dtype=np.int64)
+    minv_at = np.empty((n, r))
+    g = np.empty((r, r))
+    v = np.empty((r, r))
+    vec = np.empty((3, m))
+    rhs = np.empty(r)
+    corr = np.empty(n)
+    q = out_a
+    qd = out_b
+    for j in range(n):
+        q[j] = q0[j]
+        qd[j] = qd0[j]
+    exact = par[P_METHOD] == EXACT and r > 0
+    full = op != RESIDUAL  # a run-time flag: one compiled copy of terms() serves every call
+    status = 0
+
+    if not full:
+        terms(q, np.zeros(n), lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
+              points)
+        return 0
+
+    if op == PROJECT:
+        zero = np.zeros(n)
+        for it in range(steps + 1):
+            terms(q, zero, lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
+                  points)
+            worst = 0.0
+            for i in range(r):
+                worst = max(worst, abs(crow[i, R_RES]))
+            position = it < steps and not worst <= tol
+            for i in range(r):
+                if position:
+                    rhs[i] = crow[i, R_RES]
+                else:
+                    s = 0.0
+                    for j in range(n):
+                        s += jac[i, j] * qd0[j]
+                    rhs[i] = s
+            for i in range(n):
+                for j in range(n):
+                    lu[i, j] = mm[i, j]
+            status = max(status, lu_factor(lu, piv))
+            min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec)
+            if position:
+                for j in range(n):
+                    q[j] = q[j] - corr[j]
+            else:
+                for j in range(n):
+                    qd[j] = qd0[j] - corr[j]
+                break
+        return status
+
+    single = op == EVALUATE or op == IMPLICIT_VELOCITY
+    stages = 4 if op == RK4 else 1
+    total = 1 if single else steps * stages
+    ks = np.zeros((4, n))  # stage accelerations
+    vs = np.zeros((4, n))  # stage velocities
+    qi = np.empty(n)
+    acc = out_a if single else np.empty(n)
+    for it in range(total):
+        stage = it % stages
+        if stage == 0:
+            for j in range(n):
+                qi[j] = q[j]
+                vs[0, j] = qd[j]
+        else:
+            cst = 1.0 if stage == 3 else 0.5
+            for j in range(n):
+                qi[j] = q[j] + h * (cst * vs[stage - 1, j])
+                vs[stage, j] = qd[j] + h * (cst * ks[stage - 1, j])
+        terms(qi, vs[stage], lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
+              points)
+
+        # open-chain force Q = tau - b, plus A^T F for penalty closures; then qdd = M^-1 (...)
+        for i in range(n):
+            for j in range(n):
+                lu[i, j] = mm[i, j]
+        status = max(status, lu_factor(lu, piv))
+        if not exact:
+            for i in range(r):
+                crow[i, R_FORCE] = -(gains[i, 0] * crow[i, R_RES] + gains[i, 1] * crow[i, R_RATE])
+        for j in range(n):
+            s = tau[j] - bias[j]
+            if not exact:
+                t = 0.0
+                for i in range(r):
+                    t += jac[i, j] * crow[i, R_FORCE]
+                s = s + t
+            acc[j] = s
+        lu_solve(lu, piv, acc)
+        if exact:
+            # A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)
+            two_alpha = 2.0 * par[P_ALPHA]
+            beta2 = par[P_BETA] ** 2
+            for i in range(r):
+                s = 0.0
+                for j in range(n):
+                    s += jac[i, j] * acc[j]
+                rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
+                           + beta2 * crow[i, R_RES])
+            min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec)
+            for i in range(r):
+                crow[i, R_FORCE] = vec[0, i]
+            for j in range(n):
+                acc[j] += corr[j]
+        if op == EVALUATE:
+            kinetic = 0.0
+            potential = 0.0
+            for i in range(n):
+                mass = lflt[i, F_MASS]
+                kinetic += mass * (cm[i, C_VX] * cm[i, C_VX] + cm[i, C_VY] * cm[i, C_VY])
+                kinetic += lflt[i, F_INERTIA] * kin[i, K_OMEGA] * kin[i, K_OMEGA]
+                potential -= mass * (cm[i, C_X] * par[P_GX] + cm[i, C_Y] * par[P_GY])
+            spring = 0.0
+            if par[P_METHOD] == PENALTY:
+                for i in range(r):
+                    spring += gains[i, 0] * crow[i, R_RES] * crow[i, R_RES]
+            kin[n, K_PCOS] = 0.5 * kinetic
+            kin[n, K_PSIN] = potential
+            kin[n, K_SLIDE] = 0.5 * spring
+            return status
+
+        if op == IMPLICIT_VELOCITY or op == IMPLICIT_EULER:
+            if exact or par[P_METHOD] == EXACT:
+                for j in range(n):
+                    acc[j] = qd[j] + h * acc[j]
+            else:
+                # (M + h A^T (h Kp + Kv) A) dv = h (Q + A^T (F - h Kp A v))
+                for i in range(r):
+                    s = 0.0
+                    for j in range(n):
+                        s += jac[i, j] * qd[j]
+                    rhs[i] = crow[i, R_FORCE] - h * gains[i, 0] * s
+                    vec[2, i] = h * gains[i, 0] + gains[i, 1]
+                for k in range(n):
+                    for j in range(n):
+                        s = 0.0
+                        for i in range(r):
+                            s += jac[i, k] * vec[2, i] * jac[i, j]
+                        lu[k, j] = mm[k, j] + h * s
+                    s = 0.0
+                    for i in range(r):
+                        s += jac[i, k] * rhs[i]
+                    acc[k] = h * (tau[k] - bias[k] + s)
+                status = max(status, lu_factor(lu, piv))
+                lu_solve(lu, piv, acc)
+                for j in range(n):
+                    acc[j] += qd[j]
+            if op == IMPLICIT_VELOCITY:
+                return status
+            for j in range(n):
+                qd[j] = acc[j]
+                q[j] = q[j] + h * qd[j]
+        elif op == EXPLICIT_EULER:
+            for j in range(n):
+                q[j] = q[j] + h * qd[j]
+                qd[j] = qd[j] + h * acc[j]
+        elif op == SEMI_IMPLICIT_EULER:
+            for j in range(n):
+                qd[j] = qd[j] + h * acc[j]
+                q[j] = q[j] + h * qd[j]
+        else:
+            for j in range(n):
+                ks[stage, j] = acc[j]
+            if stage == 3:
+                for j in range(n):
+                    q[j] = q[j] + h * (
+                        B16 * vs[0, j] + B13 * vs[1, j] + B13 * vs[2, j] + B16 * vs[3, j]
+                    )
+                    qd[j] = qd[j] + h * (
+                        B16 * ks[0, j] + B13 * ks[1, j] + B13 * ks[2, j] + B16 * ks[3, j]
+                    )
+    return status

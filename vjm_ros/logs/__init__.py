@@ -1,0 +1,227 @@
+"""Logs of a simulation: MCAP (ROS 2 profile) and rerun recordings, usable without ROS.
+
+Both recorders share one API: ``write(sample)`` after every tick, ``note_reset(t)`` when the
+simulator is reset, ``close()`` (idempotent) or use as a context manager::
+
+    from vjm_ros.logs import McapRecorder, finalize_on_signals
+
+    with finalize_on_signals(), McapRecorder("run.mcap", sim.model, sim.describe(), scene.text) as rec:
+        for _ in range(n):
+            sim.advance()
+            rec.write(sim.sample())
+
+Recording time. Log times are simulated time. The simulator's clock restarts at 0 on a reset; the
+recorders keep their time axis monotonic by shifting every later episode so that it starts one
+tick after the last time written (:class:`Timebase`).
+
+The heavy dependencies (``mcap``, ``rerun``) are imported only when a recorder class is used.
+"""
+
+from __future__ import annotations
+
+import functools
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from vjm_ros.logs.mcap_recorder import McapRecorder
+    from vjm_ros.logs.rerun_recorder import RerunRecorder
+
+__all__ = ["McapRecorder", "RerunRecorder", "Timebase", "finalize_on_signals", "package_versions"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "McapRecorder":
+        from vjm_ros.logs.mcap_recorder import McapRecorder
+
+        return McapRecorder
+    if name == "RerunRecorder":
+        from vjm_ros.logs.rerun_recorder import RerunRecorder
+
+        return RerunRecorder
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+DEFAULT_SIGNALS: tuple[int, ...] = tuple(
+    s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s is not None
+)
+
+
+class _SignalDeferral:
+    """A termination signal that arrives while a recorder writes, in the main thread, is acted on
+    when the write returns: a log is never left with half a message (its statistics counting a
+    message its chunk does not hold)."""
+
+    def __init__(self) -> None:
+        self.depth = 0
+        self.pending: int | None = None
+        self.main = threading.main_thread().ident
+
+
+_DEFERRAL = _SignalDeferral()
+
+
+def atomic(method: Callable) -> Callable:
+    """Decorate a recorder method that writes: :func:`finalize_on_signals` waits for it."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        if threading.get_ident() != _DEFERRAL.main:
+            return method(self, *args, **kwargs)
+        _DEFERRAL.depth += 1
+        try:
+            return method(self, *args, **kwargs)
+        finally:
+            _DEFERRAL.depth -= 1
+            if _DEFERRAL.depth == 0 and _DEFERRAL.pending is not None:
+                code, _DEFERRAL.pending = _DEFERRAL.pending, None
+                raise SystemExit(code)
+
+    return wrapper
+
+
+@contextmanager
+def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[None]:
+    """Turn termination signals into :class:`SystemExit` while the block runs.
+
+    A process stopped with SIGTERM (``kill``, ``timeout``, a launch system) then unwinds normally,
+    so the ``close()`` of every recorder opened in or around the block runs and the logs are
+    finalized. A signal that arrives while a recorder writes takes effect when the write returns
+    (:func:`atomic`). The exit status is ``128 + signal number``, as for a default kill. Further signals
+    of the set are ignored while unwinding, so a second SIGTERM cannot cut finalization short
+    (SIGKILL still can). The previous handlers come back when the block ends. SIGINT is left
+    alone: Python already raises :class:`KeyboardInterrupt` for it.
+
+    Outside the main thread, where Python cannot install signal handlers, this does nothing.
+
+    Parameters
+    ----------
+    signals : tuple of int
+        Signals to convert; SIGTERM and SIGHUP by default.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def _ignore(signum: int, frame: object) -> None:
+        return None
+
+    def _exit(signum: int, frame: object) -> None:
+        for s in signals:
+            signal.signal(s, _ignore)
+        if _DEFERRAL.depth:  # inside a recorder's write: exit when it returns
+            _DEFERRAL.pending = 128 + signum
+            return
+        raise SystemExit(128 + signum)
+
+    previous = {s: signal.signal(s, _exit) for s in signals}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+class Recorder:
+    """Shared life cycle of the recorders: idempotent :meth:`close` and context management.
+
+    Subclasses set ``self._closed = False`` when opened and implement :meth:`_finalize`.
+    """
+
+    _closed: bool = True
+
+    def _finalize(self) -> None:
+        """Write what is pending and release the sink (called once by :meth:`close`)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Finalize the log; later calls do nothing."""
+        if self._closed:
+            return
+        self._closed = True
+        self._finalize()
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
+        return self._closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close()
+
+
+class Timebase:
+    """Monotonic recording time (ns) from the simulator's time, which restarts at each reset.
+
+    Parameters
+    ----------
+    tick : float
+        Control period, s. After a reset the next episode starts ``tick`` after the last time
+        written, so no two episodes share a time stamp.
+    """
+
+    def __init__(self, tick: float = 0.0):
+        self.tick_ns = max(int(round(tick * 1e9)), 0)
+        self.offset_ns = 0
+        self.last_ns: int | None = None
+
+    def to_ns(self, t: float) -> int:
+        """Recording time of simulator time ``t`` (s) in the current episode, ns."""
+        ns = self.offset_ns + int(round(t * 1e9))
+        if self.last_ns is None or ns > self.last_ns:
+            self.last_ns = ns
+        return ns
+
+    def reset(self, t: float | None = None) -> int:
+        """Start a new episode.
+
+        Parameters
+        ----------
+        t : float, optional
+            Simulator time at which the ending episode stopped, s; the last time written when
+            omitted or earlier.
+
+        Returns
+        -------
+        int
+            Recording time at which the new episode starts (its ``t = 0``), ns.
+        """
+        if self.last_ns is None and t is None:
+            return self.offset_ns
+        end = self.last_ns if self.last_ns is not None else 0
+        if t is not None:
+            end = max(end, self.offset_ns + int(round(t * 1e9)))
+        self.offset_ns = end + self.tick_ns
+        self.last_ns = end
+        return self.offset_ns
+
+
+def tick_of(settings: dict) -> float:
+    """Control period (s) from run settings: ``dt``, else ``1 / rate``, else 0."""
+    if settings.get("dt"):
+        return float(settings["dt"])
+    if settings.get("rate"):
+        return 1.0 / float(settings["rate"])
+    return 0.0
+
+
+def package_versions(
+    names: tuple[str, ...] = ("vjm_ros", "numpy", "scipy", "mcap", "rerun-sdk"),
+) -> dict:
+    """Installed versions of the packages that shape a log (``"not installed"`` when absent)."""
+    import platform
+    from importlib import metadata
+
+    out = {"python": platform.python_version()}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out

@@ -1,0 +1,398 @@
+"""Rerun recording of a simulation: the mechanism in 2D and time series on ``sim_time``.
+
+Entities (all times on the ``sim_time`` duration timeline, simulated seconds since the start of
+the recording, monotonic across resets as in :class:`vjm_ros.logs.Timebase`):
+
+============================== ============== ===============================================
+entity                         archetype      content
+============================== ============== ===============================================
+``mechanism/links``            LineStrips2D   every link, start to end, m
+``mechanism/joints``           Points2D       link origins (the joints), m
+``mechanism/points``           Points2D       named points (chain tips), labelled, m
+``mechanism/forces``           Arrows2D       constraint force of each closure at its point,
+                                              ``force_scale`` m/N, labelled
+``mechanism/traces``           Points2D       named points again, shown over all past time:
+                                              the tip paths
+``mechanism/cyclograph``       LineStrips2D   links every ``cyclograph_period`` s, shown over
+                                              all past time: the chrono-cyclograph
+``series/joints/position``     Scalars        one series per joint, rad or m
+``series/joints/velocity``     Scalars        rad/s or m/s
+``series/constraint_forces``   Scalars        ``<closure>.x``, ``.y`` (N) or ``.z`` (N m)
+``series/energy``              Scalars        kinetic, potential, constraint, total, J
+``series/closure_error``       Scalars        ``|C|`` per closure, m or rad
+``events``                     TextLog        resets
+``run/settings``, ``run/scene`` TextDocument  run settings (JSON), scene YAML (static)
+============================== ============== ===============================================
+
+Cost. Samples are buffered and sent with ``send_columns`` every ``batch`` ticks (or every
+``batch_seconds`` of wall time), and geometry is kept only every ``geometry_every`` ticks, so a
+tick costs a few array copies plus its share of one ``send_columns`` per entity and batch.
+
+Rerun's 2D views draw y downwards; the ``mechanism`` entity carries a static transform that
+flips y so that the mechanism appears with y up (the logged coordinates stay the world's).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from vjm_ros.core.model import ANGLE, GROUND, Model
+from vjm_ros.logs import Recorder, Timebase, atomic, messages, package_versions, tick_of
+from vjm_ros.logs.storage import VIEWER_SCHEMES
+
+TIMELINE = "sim_time"
+ROOT = "mechanism"
+SERIES = {
+    "position": "series/joints/position",
+    "velocity": "series/joints/velocity",
+    "forces": "series/constraint_forces",
+    "energy": "series/energy",
+    "error": "series/closure_error",
+}
+_CONNECT_SCHEMES = VIEWER_SCHEMES
+_LINK_COLORS = np.array(
+    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75]],
+    dtype=np.uint8,
+)
+
+
+def force_components(model: Model) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Which constraint-force components are meaningful, per closure kind.
+
+    Hinge and slider closures report a force ``(x, y)`` N; angle closures a moment ``z`` N m.
+
+    Returns
+    -------
+    rows, cols : ndarray of int, shape (m,)
+        Index into ``Sample.closure_force`` (k, 3).
+    names : list of str
+        ``"<closure>.x"`` etc.
+    """
+    rows, cols, names = [], [], []
+    for i, c in enumerate(model.closures):
+        for j, axis in ((2, "z"),) if c.kind == ANGLE else ((0, "x"), (1, "y")):
+            rows.append(i)
+            cols.append(j)
+            names.append(f"{c.name}.{axis}")
+    return np.array(rows, dtype=int), np.array(cols, dtype=int), names
+
+
+def default_blueprint(model: Model) -> rrb.Blueprint:
+    """Mechanism view on the left, one plot per series group on the right."""
+    infinite = rrb.VisibleTimeRanges(
+        timeline=TIMELINE,
+        start=rrb.TimeRangeBoundary.infinite(),
+        end=rrb.TimeRangeBoundary.cursor_relative(),
+    )
+    mechanism = rrb.Spatial2DView(
+        name=f"{model.name}: mechanism",
+        origin="/",
+        contents=f"+ /{ROOT}/**",
+        overrides={f"/{ROOT}/traces": infinite, f"/{ROOT}/cyclograph": infinite},
+    )
+    plots = [
+        rrb.TimeSeriesView(name="Joint positions (rad, m)", origin=f"/{SERIES['position']}"),
+        rrb.TimeSeriesView(name="Joint velocities (rad/s, m/s)", origin=f"/{SERIES['velocity']}"),
+        rrb.TimeSeriesView(name="Constraint forces (N, N m)", origin=f"/{SERIES['forces']}"),
+        rrb.TimeSeriesView(name="Energy (J)", origin=f"/{SERIES['energy']}"),
+        rrb.TimeSeriesView(name="Closure error (m, rad)", origin=f"/{SERIES['error']}"),
+    ]
+    left = rrb.Vertical(
+        mechanism, rrb.TextLogView(name="Events", origin="/events"), row_shares=[5, 1]
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(left, rrb.Vertical(*plots), column_shares=[3, 2]),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=True,
+    )
+
+
+class RerunRecorder(Recorder):
+    """Log simulation samples to rerun.
+
+    Parameters
+    ----------
+    target : str or Path
+        A ``.rrd`` file path, ``"spawn"`` (start a viewer), ``"connect"`` (the viewer at the
+        default address) or a ``rerun+http://...`` address.
+    model : Model
+    settings : dict
+        Run settings (``Simulator.describe()``), stored as ``run/settings``; ``dt`` or ``rate``
+        sets the gap between episodes after a reset.
+    geometry_every : int
+        Keep the mechanism drawing of every ``geometry_every``-th sample (and the first).
+    batch : int, optional
+        Send buffered samples every ``batch`` ticks: 100 for a viewer, 1000 for a file (fewer,
+        larger chunks keep files small).
+    batch_seconds : float, optional
+        ... or when this much wall time has passed since the last send, s (0.2 for a viewer, 1
+        for a file).
+    force_scale : float
+        Arrow length per newton (per N m for angle closures), m/N.
+    cyclograph_period : float
+        Simulated time between two poses of the chrono-cyclograph, s; 0 disables it.
+    scene_text : str
+        Scene YAML for ``run/scene`` (``model.source_text`` when empty).
+    application_id : str
+    recording_id : str, optional
+        A fresh UUID when omitted.
+    flip_y : bool
+        Log the y-flipping transform on ``mechanism`` (see module notes).
+    """
+
+    def __init__(
+        self,
+        target: str | Path,
+        model: Model,
+        settings: dict,
+        geometry_every: int = 10,
+        batch: int | None = None,
+        batch_seconds: float | None = None,
+        force_scale: float = 0.01,
+        cyclograph_period: float = 0.1,
+        scene_text: str = "",
+        application_id: str = "vjm_ros",
+        recording_id: str | None = None,
+        flip_y: bool = True,
+    ):
+        self.model = model
+        self.settings = dict(settings)
+        self.geometry_every = max(int(geometry_every), 1)
+        live = str(target) in ("spawn", "connect") or str(target).startswith(_CONNECT_SCHEMES)
+        self.batch = max(int(batch if batch is not None else (100 if live else 1000)), 1)
+        self.batch_seconds = float(
+            batch_seconds if batch_seconds is not None else (0.2 if live else 1.0)
+        )
+        self.force_scale = float(force_scale)
+        self.cyclograph_ns = int(cyclograph_period * 1e9)
+        self.flip_y = bool(flip_y)
+        self.timebase = Timebase(tick_of(settings))
+        self.samples = 0
+        self._closed = False
+        self._force_rows, self._force_cols, self._force_names = force_components(model)
+        self._is_angle = np.array([c.kind == ANGLE for c in model.closures], dtype=bool)
+        self.rec = rr.RecordingStream(application_id, recording_id=recording_id or uuid.uuid4())
+        self._connect(target, default_blueprint(model))
+        self._log_static(scene_text or model.source_text)
+        self._allocate()
+        self._last_send = time.monotonic()
+        self._next_cyclograph_ns = 0
+
+    # ------------------------------------------------------------------ set-up
+    def _connect(self, target: str | Path, blueprint: rrb.Blueprint) -> None:
+        t = str(target)
+        if t == "spawn":
+            self.rec.spawn(default_blueprint=blueprint)
+        elif t == "connect":
+            self.rec.connect_grpc(default_blueprint=blueprint)
+        elif t.startswith(_CONNECT_SCHEMES):
+            self.rec.connect_grpc(t, default_blueprint=blueprint)
+        else:
+            self.rec.save(t, default_blueprint=blueprint)
+        self.target = t
+
+    def _log_static(self, scene_text: str) -> None:
+        log, model = self.rec.log, self.model
+        self.rec.send_recording_name(model.name)
+        run = {"scene": model.name, **self.settings, "package_versions": package_versions()}
+        log(
+            "run/settings",
+            rr.TextDocument(json.dumps(run, indent=2, default=str), media_type="text/plain"),
+            static=True,
+        )
+        log("run/scene", rr.TextDocument(scene_text, media_type="text/plain"), static=True)
+        if self.flip_y:
+            log(ROOT, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])), static=True)
+        colors = _LINK_COLORS[model.chain_of % len(_LINK_COLORS)]
+        log(f"{ROOT}/links", rr.LineStrips2D.from_fields(colors=colors, radii=0.008), static=True)
+        log(
+            f"{ROOT}/joints", rr.Points2D.from_fields(colors=[40, 40, 40], radii=0.015), static=True
+        )
+        names = [p.name for p in model.points]
+        log(
+            f"{ROOT}/points",
+            rr.Points2D.from_fields(labels=names, colors=[0, 0, 0], radii=0.012),
+            static=True,
+        )
+        log(
+            f"{ROOT}/traces",
+            rr.Points2D.from_fields(colors=[120, 120, 120], radii=0.003),
+            static=True,
+        )
+        log(
+            f"{ROOT}/cyclograph",
+            rr.LineStrips2D.from_fields(colors=[170, 170, 200, 90], radii=0.002),
+            static=True,
+        )
+        log(
+            f"{ROOT}/forces",
+            rr.Arrows2D.from_fields(labels=model.closure_names, colors=[220, 40, 30], radii=0.006),
+            static=True,
+        )
+        ground = [c.origin for c in model.chains]
+        ground += [
+            c.target.local for c in model.closures if c.target.link == GROUND and c.kind != ANGLE
+        ]
+        log(
+            f"{ROOT}/ground",
+            rr.Points2D(
+                np.array(ground, dtype=float).reshape(-1, 2), colors=[0, 0, 0], radii=0.025
+            ),
+            static=True,
+        )
+        series_names = {
+            "position": model.joint_names,
+            "velocity": model.joint_names,
+            "forces": self._force_names,
+            "energy": list(messages.ENERGY_LABELS),
+            "error": model.closure_names,
+        }
+        for key, labels in series_names.items():
+            log(SERIES[key], rr.SeriesLines(names=labels), static=True)
+
+    def _allocate(self) -> None:
+        b, n, k = self.batch, self.model.n, len(self.model.closures)
+        self._t = np.zeros(b, dtype=np.int64)
+        self._q = np.zeros((b, n))
+        self._qd = np.zeros((b, n))
+        self._force = np.zeros((b, k, 3))
+        self._energy = np.zeros((b, 4))
+        self._error = np.zeros((b, k))
+        self._count = 0
+        self._geo: list[tuple] = []
+        self._cyc: list[tuple] = []
+
+    # ------------------------------------------------------------------ writing
+    @atomic
+    def write(self, sample) -> None:
+        """Buffer one tick; send the buffer when full or old.
+
+        Parameters
+        ----------
+        sample : Sample
+            From :meth:`vjm_ros.sim.simulator.Simulator.sample`.
+        """
+        if self._closed:
+            raise ValueError(f"write to a closed recorder ({self.target})")
+        ns = self.timebase.to_ns(sample.t)
+        i = self._count
+        self._t[i] = ns
+        self._q[i] = sample.q
+        self._qd[i] = sample.qd
+        self._force[i] = sample.closure_force
+        self._energy[i] = sample.energy
+        self._error[i] = sample.closure_error
+        self._count = i + 1
+        if self.samples % self.geometry_every == 0:
+            self._geo.append(
+                (ns, sample.segments, sample.points, sample.closure_points, sample.closure_force)
+            )
+            if self.cyclograph_ns > 0 and ns >= self._next_cyclograph_ns:
+                self._cyc.append((ns, sample.segments))
+                self._next_cyclograph_ns = ns + self.cyclograph_ns
+        self.samples += 1
+        if self._count == self.batch or time.monotonic() - self._last_send >= self.batch_seconds:
+            self.send()
+
+    def send(self) -> None:
+        """Send everything buffered so far."""
+        c = self._count
+        if c:
+            idx = [rr.TimeColumn(TIMELINE, duration=self._t[:c].astype("timedelta64[ns]"))]
+            send = self.rec.send_columns
+            send(SERIES["position"], idx, rr.Scalars.columns(scalars=self._q[:c].copy()))
+            send(SERIES["velocity"], idx, rr.Scalars.columns(scalars=self._qd[:c].copy()))
+            if len(self._force_names):
+                forces = self._force[:c][:, self._force_rows, self._force_cols]
+                send(SERIES["forces"], idx, rr.Scalars.columns(scalars=forces))
+                send(SERIES["error"], idx, rr.Scalars.columns(scalars=self._error[:c].copy()))
+            send(SERIES["energy"], idx, rr.Scalars.columns(scalars=self._energy[:c].copy()))
+            self._count = 0
+        if self._geo:
+            self._send_geometry()
+        self._last_send = time.monotonic()
+
+    def _send_geometry(self) -> None:
+        ns, seg, pts, cpts, cf = zip(*self._geo, strict=True)
+        self._geo = []
+        g = len(ns)
+        idx = [rr.TimeColumn(TIMELINE, duration=np.array(ns, dtype="timedelta64[ns]"))]
+        n = self.model.n
+        segments = np.concatenate(seg).reshape(g * n, 2, 2)
+        send = self.rec.send_columns
+        send(f"{ROOT}/links", idx, rr.LineStrips2D.columns(strips=segments).partition([n] * g))
+        joints = segments[:, 0, :]
+        send(f"{ROOT}/joints", idx, rr.Points2D.columns(positions=joints).partition([n] * g))
+        p = len(self.model.points)
+        if p:
+            points = np.concatenate(pts).reshape(g * p, 2)
+            send(f"{ROOT}/points", idx, rr.Points2D.columns(positions=points).partition([p] * g))
+            send(f"{ROOT}/traces", idx, rr.Points2D.columns(positions=points).partition([p] * g))
+        k = len(self.model.closures)
+        if k:
+            origins = np.concatenate(cpts).reshape(g * k, 2)
+            forces = np.concatenate(cf).reshape(g * k, 3)
+            vec = self._arrow_vectors(forces)
+            cols = rr.Arrows2D.columns(origins=origins, vectors=vec).partition([k] * g)
+            send(f"{ROOT}/forces", idx, cols)
+        if self._cyc:
+            cns, cseg = zip(*self._cyc, strict=True)
+            self._cyc = []
+            cidx = [rr.TimeColumn(TIMELINE, duration=np.array(cns, dtype="timedelta64[ns]"))]
+            strips = np.concatenate(cseg).reshape(len(cns) * n, 2, 2)
+            cols = rr.LineStrips2D.columns(strips=strips).partition([n] * len(cns))
+            send(f"{ROOT}/cyclograph", cidx, cols)
+
+    def _arrow_vectors(self, forces: np.ndarray) -> np.ndarray:
+        """Arrow vectors, m: ``force_scale * (fx, fy)``; a moment ``mz`` is drawn along +y."""
+        vec = forces[:, :2].copy()
+        moment = np.tile(self._is_angle, len(forces) // len(self._is_angle))
+        vec[moment, 1] = forces[moment, 2]
+        return self.force_scale * vec
+
+    @atomic
+    def note(self, text: str, level: str = "INFO", t: float | None = None) -> None:
+        """Log ``text`` on ``events``.
+
+        Parameters
+        ----------
+        text : str
+        level : str
+            Rerun text-log level (``"INFO"``, ``"WARN"``, ...).
+        t : float, optional
+            Simulator time of the current episode, s; the latest recording time when omitted.
+        """
+        if self._closed:
+            raise ValueError(f"write to a closed recorder ({self.target})")
+        self.send()
+        ns = self.timebase.to_ns(t) if t is not None else (self.timebase.last_ns or 0)
+        self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
+        self.rec.log("events", rr.TextLog(text, level=level))
+
+    @atomic
+    def note_reset(self, t: float | None = None) -> None:
+        """Mark a simulator reset (see :meth:`vjm_ros.logs.McapRecorder.note_reset`)."""
+        if self._closed:
+            raise ValueError(f"write to a closed recorder ({self.target})")
+        self.send()
+        ns = self.timebase.reset(t)
+        self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
+        self._next_cyclograph_ns = ns
+        self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
+        self.rec.log("events", rr.TextLog("reset", level="INFO"))
+
+    # ------------------------------------------------------------------ closing
+    def _finalize(self) -> None:
+        """Send what is buffered, flush and close the sink."""
+        try:
+            self.send()
+            self.rec.flush()
+        finally:
+            self.rec.disconnect()

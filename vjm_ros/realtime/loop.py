@@ -1,0 +1,492 @@
+"""The tick loop of the simulator node, without ROS.
+
+One tick (:meth:`TickLoop.run`):
+
+1. wait: realtime mode waits for the tick's wall-clock deadline (:class:`~.pacing.Pacer`), fast
+   mode does not wait, lockstep mode waits for a command received since the previous tick (or
+   ``lockstep_timeout``, counted);
+2. latch the efforts (:meth:`~.commands.CommandBuffer.latch`): a command received while the
+   previous tick ran applies from this tick on, and it is held over the whole tick;
+3. advance the simulator by one tick;
+4. outputs: ``/clock`` every tick; joint states every ``publish_every`` ticks (from the state
+   itself, cheap); constraint forces, wrenches and energy every ``forces_every`` ticks (these need
+   a full :meth:`~vjm_ros.sim.simulator.Simulator.sample`); recorders every tick (a log that cannot
+   be written is given up, :class:`~vjm_ros.logs.storage.LogWriters`); markers and
+   diagnostics at their wall-clock periods.
+
+In realtime mode ROS callbacks run between ticks: the loop's :class:`~.gate.Gate` lets them start
+in the first :data:`GATE_OPEN_SHARE` of the time to the next deadline and closes at the deadline's
+approach, so that a flood of incoming messages cannot hold the interpreter when a tick is due.
+
+The state at ``t = 0`` is published before the first tick (a lockstep controller answers it with
+the first command); in lockstep mode, resuming from a pause publishes the joint state again. With
+``wait_for_command`` the loop holds the initial state until the first command arrives, so that a
+controller whose discovery takes a while finds the mechanism where the scene put it.
+
+Pause, step, reset and stop are requests from other threads (the service callbacks), served
+between ticks, so the simulator is only ever touched by the loop's thread.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from vjm_ros.logs.storage import LogWriters
+from vjm_ros.realtime.commands import CommandBuffer
+from vjm_ros.realtime.gate import Gate
+from vjm_ros.realtime.monitor import Monitor
+from vjm_ros.realtime.pacing import Pacer
+from vjm_ros.sim.simulator import Sample, Simulator
+
+WAIT_SLICE = 0.05
+"""Longest uninterrupted wait of the loop, s (how soon it sees a request or a stop)."""
+GATE_OPEN_SHARE = 0.6
+"""Share of the time between two realtime ticks in which ROS callbacks may start; the rest
+lets a callback that started late finish before the tick is due."""
+GATE_MIN_OPEN = 1e-4
+"""Shortest time the executor's gate stays open between two ticks, s: when the loop runs behind
+and catches up, ROS callbacks (the commands) still get a turn at every tick."""
+SIGMA_PERIOD = 0.01
+"""Simulated seconds between two evaluations of the closure Jacobian's smallest singular value
+(for ``/diagnostics``): an SVD per tick would cost a fifth of a tick's CPU for a figure reported
+once a second, and a singular pose is approached over many ticks."""
+HOLD_REPUBLISH = 0.1
+"""Period of the joint state republished while waiting for the first command, wall s."""
+PAUSE_WAIT = 5.0
+"""Longest a pause request waits for the tick under way to finish, wall s (a hang guard: a tick
+takes well under a millisecond)."""
+
+DURATION = "duration"
+STOPPED = "stopped"
+
+
+class Outputs(Protocol):
+    """Where the loop sends what it produces (the node publishes; tests collect)."""
+
+    def clock(self, t: float) -> None:
+        """Simulated time ``t`` (s), every tick."""
+
+    def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        """Joint positions, rates and applied efforts at simulated time ``t`` (s), shape (n,)."""
+
+    def dynamics(self, sample: Sample) -> None:
+        """Constraint forces and energy of a sample."""
+
+    def markers(self, sample: Sample) -> None:
+        """A drawing of the mechanism (decimated)."""
+
+    def diagnostics(self, report: dict, paused: bool) -> None:
+        """Periodic health figures (:meth:`~.monitor.Monitor.report`)."""
+
+    def notice(self, kind: str, text: str) -> None:
+        """An event: ``command_timeout``, ``lockstep_timeout``, ``paused``, ``resumed``,
+        ``stepped``, ``reset``, ``started``, ``log_failed``."""
+
+    def rebuilt(self, simulator: Simulator) -> None:
+        """The simulator was replaced (new settings applied at a reset)."""
+
+
+class Recorder(Protocol):
+    """A log (:mod:`vjm_ros.logs`)."""
+
+    def write(self, sample: Sample) -> None: ...
+
+    def note_reset(self, t: float) -> None: ...
+
+
+@dataclass
+class LoopOptions:
+    """Settings of the loop that may change while it runs.
+
+    Attributes
+    ----------
+    realtime : bool
+        Pace to the wall clock.
+    duration : float
+        Stop after this much simulated time, s; 0: never.
+    publish_every : int
+        Ticks between two joint-state outputs.
+    forces_every : int
+        Ticks between two outputs of constraint forces and energy.
+    publish_clock : bool
+        Send the simulated time every tick.
+    lockstep : bool
+        Wait for a fresh command before each tick.
+    lockstep_timeout : float
+        Longest lockstep wait, wall s.
+    marker_period : float
+        Wall seconds between marker outputs; 0: none.
+    diagnostics_period : float
+        Wall seconds between diagnostics.
+    wait_for_command : bool
+        Hold the initial state (after start and after each reset) until a command arrives,
+        republishing the joint state every :data:`HOLD_REPUBLISH` seconds meanwhile.
+    """
+
+    realtime: bool = True
+    duration: float = 0.0
+    publish_every: int = 1
+    forces_every: int = 1
+    publish_clock: bool = True
+    lockstep: bool = False
+    lockstep_timeout: float = 1.0
+    marker_period: float = 1.0 / 30.0
+    diagnostics_period: float = 1.0
+    wait_for_command: bool = False
+
+
+class TickLoop:
+    """Runs a :class:`~vjm_ros.sim.simulator.Simulator` tick by tick.
+
+    Parameters
+    ----------
+    simulator : Simulator
+    commands : CommandBuffer
+        Efforts in the simulator's actuator order.
+    outputs : Outputs
+    options : LoopOptions
+    recorders : sequence of Recorder
+        Written with every tick's sample; told about resets.
+    paused : bool
+        Start paused.
+    clock : callable
+        Monotonic wall time, s.
+    sleep : callable
+        ``sleep(seconds)``.
+    """
+
+    def __init__(
+        self,
+        simulator: Simulator,
+        commands: CommandBuffer,
+        outputs: Outputs,
+        options: LoopOptions | None = None,
+        recorders: Sequence[Recorder] = (),
+        *,
+        paused: bool = False,
+        clock: Callable[[], float] = time.perf_counter,
+        sleep: Callable[[float], None] = time.sleep,
+    ):
+        self.sim = simulator
+        self.commands = commands
+        self.outputs = outputs
+        self.options = options or LoopOptions()
+        self.logs = LogWriters(recorders, self._log_failed)
+        self._clock = clock
+        self._sleep = sleep
+        self.pacer = Pacer(simulator.dt, self.options.realtime, clock=clock, sleep=sleep)
+        self.monitor = Monitor(clock)
+        self.lockstep_timeouts = 0
+        self._cv = threading.Condition()
+        self._stop = False
+        self._paused = paused
+        self._in_tick = False
+        self._steps_asked = self._steps_done = 0
+        self._resets_asked = self._resets_done = 0
+        self._replacement: tuple[Simulator, CommandBuffer] | None = None
+        self._next_markers = 0.0
+        self._next_diagnostics = 0.0
+        self._next_sigma = 0.0
+        self._realtime = self.options.realtime
+        self._holding = False
+        self.gate = Gate(clock)
+        """When ROS callbacks may run: closed from just before a realtime tick's deadline until
+        its outputs are out (:class:`~.gate.Gate`)."""
+        self._gate_opened = -math.inf
+
+    @property
+    def recorders(self) -> list:
+        """The logs still being written."""
+        return self.logs.active
+
+    def _log_failed(self, where: str, error: str) -> None:
+        self.outputs.notice(
+            "log_failed", f"log {where} could not be written ({error}); recording to it stopped "
+            f"at t = {self.sim.t:.6g} s, the simulation goes on")
+
+    # ------------------------------------------------------------------ requests (any thread)
+    def stop(self) -> None:
+        """Ask the loop to return after the current tick (safe from signal handlers)."""
+        self._stop = True
+
+    @property
+    def paused(self) -> bool:
+        """Whether ticks are suspended."""
+        return self._paused
+
+    def pause(self, paused: bool) -> None:
+        """Suspend (True) or resume (False) the ticks.
+
+        A pause takes effect at a tick boundary: a tick already under way (a callback may run
+        beside one) is finished before this returns, so ``sim.t`` is then the time of the last
+        state published, and no tick follows until resumed.
+        """
+        with self._cv:
+            changed = paused != self._paused
+            self._paused = paused
+            self._cv.notify_all()
+            if paused:
+                self._cv.wait_for(lambda: not self._in_tick, PAUSE_WAIT)
+        if changed:
+            self.outputs.notice("paused" if paused else "resumed",
+                                f"{'paused' if paused else 'resumed'} at t = {self.sim.t:.6g} s")
+
+    def step(self, timeout: float = 2.0) -> float | None:
+        """Run one tick while paused and wait for it.
+
+        Returns
+        -------
+        float or None
+            Simulated time after the tick, s; None if not paused or not done within ``timeout``.
+        """
+        with self._cv:
+            if not self._paused:
+                return None
+            self._steps_asked += 1
+            ticket = self._steps_asked
+            self._cv.notify_all()
+            done = self._cv.wait_for(lambda: self._steps_done >= ticket, timeout)
+            return self.sim.t if done else None
+
+    def reset(self, timeout: float = 2.0) -> bool:
+        """Return to the initial state (with new settings if some are waiting) and wait for it.
+
+        Returns
+        -------
+        bool
+            Done within ``timeout``.
+        """
+        with self._cv:
+            self._resets_asked += 1
+            ticket = self._resets_asked
+            self._cv.notify_all()
+            return self._cv.wait_for(lambda: self._resets_done >= ticket, timeout)
+
+    def replace_on_reset(self, simulator: Simulator, commands: CommandBuffer) -> None:
+        """Use ``simulator`` and ``commands`` from the next reset on."""
+        with self._cv:
+            self._replacement = (simulator, commands)
+
+    # ------------------------------------------------------------------ the loop
+    def run(self) -> str:
+        """Tick until stopped or until ``duration``.
+
+        Returns
+        -------
+        str
+            :data:`DURATION` or :data:`STOPPED`.
+
+        Raises
+        ------
+        DivergenceError
+            From the simulator; the loop stops.
+        """
+        try:
+            self._emit(self.sim.sample(singular_values=True))
+            self._holding = self.options.wait_for_command
+            self._next_diagnostics = self._clock() + self.options.diagnostics_period
+            while not self._stop:
+                self._serve_requests()
+                if self._paused:
+                    self._idle()
+                    continue
+                if self._holding:
+                    self._hold()
+                    continue
+                if self._duration_reached():
+                    return DURATION
+                if not self._await_tick():
+                    continue
+                with self._cv:
+                    if self._interrupted():  # a pause, reset or stop came while waiting
+                        continue
+                    self._in_tick = True
+                try:
+                    self._tick()
+                finally:
+                    with self._cv:
+                        self._in_tick = False
+                        self._cv.notify_all()
+                self._periodic()
+                self._open_gate()
+            return STOPPED
+        finally:
+            self.gate.open()
+            with self._cv:
+                self._cv.notify_all()
+
+    def _hold(self) -> None:
+        """Keep the initial state until a command arrives, republishing it for late joiners."""
+        self.gate.open()
+        if self.commands.wait_fresh(HOLD_REPUBLISH):
+            self._holding = False
+            self.pacer.restart()
+            self.outputs.notice("started", f"first command: running from t = {self.sim.t:.6g} s")
+            return
+        sim = self.sim
+        self.outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+        self._periodic()
+
+    def _duration_reached(self) -> bool:
+        d = self.options.duration
+        return d > 0 and self.sim.ticks >= math.ceil(d * self.sim.settings.rate - 1e-9)
+
+    def _await_tick(self) -> bool:
+        """Wait until the next tick may run; False when a request or a stop came first."""
+        opts = self.options
+        if opts.lockstep:
+            self.gate.open()
+            deadline = self._clock() + opts.lockstep_timeout
+            while not self._interrupted():
+                remaining = deadline - self._clock()
+                if remaining <= 0:
+                    self.lockstep_timeouts += 1
+                    self.outputs.notice(
+                        "lockstep_timeout",
+                        f"no command within lockstep_timeout = {opts.lockstep_timeout:g} s at "
+                        f"t = {self.sim.t:.6g} s; stepping with the efforts in force",
+                    )
+                    return True
+                if self.commands.wait_fresh(min(remaining, WAIT_SLICE)):
+                    return True
+            return False
+        if opts.realtime != self._realtime:
+            self._realtime = self.pacer.realtime = opts.realtime
+            self.pacer.restart()
+        return not math.isnan(self.pacer.wait(self._interrupted, self._close_gate))
+
+    def _open_gate(self) -> None:
+        now = self._gate_opened = self._clock()
+        due = self.pacer.next_due
+        if due is None or self.options.lockstep:
+            self.gate.open()
+        else:
+            self.gate.open(max(now + GATE_OPEN_SHARE * (due - now), now + GATE_MIN_OPEN))
+
+    def _close_gate(self) -> None:
+        """Stop ROS callbacks for the tick, after their minimal turn since the previous one."""
+        left = GATE_MIN_OPEN - (self._clock() - self._gate_opened)
+        if left > 0:
+            self._sleep(left)
+        self.gate.close()
+
+    def _interrupted(self) -> bool:
+        return (
+            self._stop
+            or self._paused
+            or self._resets_asked > self._resets_done
+        )
+
+    def _tick(self) -> None:
+        latched = self.commands.latch()
+        if latched.timed_out:
+            self.outputs.notice(
+                "command_timeout",
+                f"no valid command for {self.commands.timeout:g} s: efforts set to zero at "
+                f"t = {self.sim.t:.6g} s",
+            )
+        sim, opts, outputs = self.sim, self.options, self.outputs
+        if latched.fresh or latched.timed_out:
+            sim.set_efforts(latched.efforts)
+        sim.advance()
+        if opts.publish_clock:
+            outputs.clock(sim.t)
+        if sim.ticks % opts.publish_every == 0:
+            outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+        forces = sim.ticks % opts.forces_every == 0
+        now = self._clock()
+        draw = opts.marker_period > 0 and now >= self._next_markers
+        if forces or draw or self.recorders:
+            sigma = forces and sim.t >= self._next_sigma
+            if sigma:
+                self._next_sigma = sim.t + SIGMA_PERIOD - 1e-12
+            sample = sim.sample(singular_values=sigma, geometry=draw or bool(self.recorders))
+            if forces:
+                outputs.dynamics(sample)
+                self.monitor.observe(sample)
+            self.logs.write(sample)
+            if draw:
+                outputs.markers(sample)
+                self._next_markers = now + opts.marker_period
+
+    def _emit(self, sample: Sample) -> None:
+        """Outputs of a state that starts an episode (t = 0)."""
+        if self.options.publish_clock:
+            self.outputs.clock(sample.t)
+        self.outputs.joints(sample.t, sample.q, sample.qd, sample.effort)
+        self.outputs.dynamics(sample)
+        self.monitor.observe(sample)
+        self.logs.write(sample)
+        if self.options.marker_period > 0:
+            self.outputs.markers(sample)
+
+    def _periodic(self) -> None:
+        now = self._clock()
+        if now >= self._next_diagnostics:
+            self._next_diagnostics = now + self.options.diagnostics_period
+            self.outputs.diagnostics(self.report(), self._paused)
+
+    def report(self) -> dict:
+        """Current health figures (starts a new report window)."""
+        counters = {
+            "commands_accepted": self.commands.accepted,
+            "commands_rejected": self.commands.rejected,
+            "efforts_clamped": self.commands.clamped,
+            "command_timeouts": self.commands.timeouts,
+            "lockstep_timeouts": self.lockstep_timeouts,
+        }
+        return self.monitor.report(self.sim.t, self.pacer.stats, counters)
+
+    def _idle(self) -> None:
+        """Paused: serve steps, keep diagnostics going, otherwise wait."""
+        self.gate.open()
+        with self._cv:
+            if self._steps_asked == self._steps_done and not self._interrupted_while_paused():
+                self._cv.wait(WAIT_SLICE)
+            step = self._paused and self._steps_asked > self._steps_done
+        if step:
+            self._tick()
+            with self._cv:
+                self._steps_done += 1
+                self._cv.notify_all()
+            self.outputs.notice("stepped", f"stepped to t = {self.sim.t:.6g} s")
+        self._periodic()
+        if not self._paused:
+            self.pacer.restart()
+            if self.options.lockstep:  # give the controller a state to answer
+                sim = self.sim
+                self.outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+
+    def _interrupted_while_paused(self) -> bool:
+        return self._stop or not self._paused or self._resets_asked > self._resets_done
+
+    def _serve_requests(self) -> None:
+        if self._resets_asked == self._resets_done:
+            return
+        t_before = self.sim.t
+        with self._cv:
+            replacement, self._replacement = self._replacement, None
+        if replacement is not None:
+            self.sim, self.commands = replacement
+            self.pacer.period = self.sim.dt
+            self.outputs.rebuilt(self.sim)
+        else:
+            self.sim.reset()
+        self.commands.clear()
+        self.logs.note_reset(t_before)
+        self.monitor.reset(0.0)
+        self._next_sigma = 0.0
+        self.pacer.restart()
+        self.outputs.notice("reset", f"reset at t = {t_before:.6g} s to the initial state")
+        self._emit(self.sim.sample(singular_values=True))
+        self._holding = self.options.wait_for_command
+        with self._cv:
+            self._resets_done = self._resets_asked
+            self._cv.notify_all()

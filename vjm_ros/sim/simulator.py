@@ -1,0 +1,655 @@
+"""The simulation loop without ROS: control ticks, closure settings, sampling, divergence guard.
+
+A control tick of length ``dt = 1 / rate`` holds the efforts constant and advances the physics by
+``substeps`` fixed steps (or one adaptive solve) to ``t + dt`` (docs/design.md section 3).
+"""
+
+from __future__ import annotations
+
+import collections
+import importlib.util
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from vjm_ros.core.constraints import (
+    ExactClosure,
+    PenaltyClosure,
+    closure_mobility,
+    penalty_modes,
+)
+from vjm_ros.core.errors import ConfigurationError, DivergenceError, StiffnessError
+from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
+from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.model import Model
+
+THESIS_KP = 1e5
+"""The thesis's closure stiffness (Tables 4.1-4.5, printed as "Ns/m"), N/m."""
+THESIS_KV = 100.0
+"""The thesis's closure damping, N s/m."""
+
+STIFFNESS_MARGIN = 1e-6
+"""Relative margin below a stability bound: a closure mode whose ``omega_n h`` comes within it of
+the bound is refused. On the bound the linearized closure error neither grows nor decays, and
+the changing pose tips it over (double_slider with semi-implicit Euler at ``Kp h (h + 2 Kv/Kp)
+= 4 m_eff`` exactly diverges within 0.4 s)."""
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """How to integrate a scene.
+
+    Attributes
+    ----------
+    integrator : str
+        Registry name (see :data:`vjm_ros.core.integrators.INTEGRATORS`).
+    closure : str
+        ``"penalty"`` or ``"exact"``.
+    rate : float
+        Control ticks per second, Hz.
+    substeps : int
+        Fixed steps per tick.
+    kp, kv : float or None
+        Raw penalty gains (N/m, N s/m; N m/rad for angle rows). Used when given.
+    omega_n, zeta : float or None
+        Penalty gains as natural frequency (rad/s) and damping ratio per row, through the
+        effective mass at the initial pose. Used when ``kp`` is not given.
+    alpha, beta : float
+        Baumgarte gains of the exact closure, 1/s.
+    projection : bool
+        Exact closure only: project ``q``, ``qd`` onto the closure manifold after each tick.
+    rtol, atol : float
+        Tolerances of adaptive integrators.
+    kernel : str
+        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
+        error without numba) or ``"numpy"`` (the reference implementation).
+    check_stiffness : bool
+        Refuse penalty gains beyond the integrator's stability bound before running (judged on
+        the coupled closure modes at the initial pose, see :attr:`Simulator.stiffness_report`).
+    divergence_limit : float or None
+        Largest closure residual (m or rad) before the run is stopped; None disables the check.
+    """
+
+    integrator: str = "rk4"
+    closure: str = "penalty"
+    rate: float = 1000.0
+    substeps: int = 1
+    kp: float | None = None
+    kv: float | None = None
+    omega_n: float | None = None
+    zeta: float | None = None
+    alpha: float | None = None
+    beta: float | None = None
+    projection: bool = False
+    rtol: float = 1e-9
+    atol: float = 1e-12
+    kernel: str = "auto"
+    check_stiffness: bool = True
+    divergence_limit: float | None = None
+
+    def validated(self) -> SimulationSettings:
+        """Check value ranges; raise :class:`ConfigurationError` naming the setting."""
+        if self.closure not in ("penalty", "exact"):
+            raise ConfigurationError(
+                f"closure: expected 'penalty' or 'exact', found {self.closure!r}"
+            )
+        if not (np.isfinite(self.rate) and self.rate > 0):
+            raise ConfigurationError(f"rate: expected a positive number of Hz, found {self.rate!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ConfigurationError(
+                f"substeps: expected a whole number >= 1, found {self.substeps!r}"
+            )
+        for key in ("kp", "kv", "omega_n", "zeta"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        for key in ("alpha", "beta", "rtol", "atol"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        if self.kernel not in ("auto", "numba", "numpy"):
+            raise ConfigurationError(
+                f"kernel: expected 'auto', 'numba' or 'numpy', found {self.kernel!r}"
+            )
+        if self.kernel == "numba" and importlib.util.find_spec("numba") is None:
+            raise ConfigurationError("kernel: 'numba' needs the numba package")
+        make_integrator(self.integrator)  # raises with the list of known names
+        return self
+
+
+@dataclass
+class Sample:
+    """Everything observable at the end of a tick.
+
+    Attributes
+    ----------
+    t : float
+        Simulated time, s.
+    q, qd, qdd, effort : ndarray, shape (n,)
+        Joint coordinates, rates, accelerations and applied efforts (N m or N).
+    theta : ndarray, shape (n,)
+        Absolute link angles, rad.
+    points : ndarray, shape (n_points, 2), or None
+        Named point positions, m (None when the sample was taken without geometry).
+    closure_force : ndarray, shape (k, 3)
+        World-frame force of each closure on its point ``(Fx, Fy, Mz)``, N / N m.
+    closure_error : ndarray, shape (k,)
+        ``|C|`` per closure, m (rad for angle closures).
+    closure_points : ndarray, shape (k, 2)
+        Point of application of each closure force, m.
+    energy : ndarray, shape (4,)
+        Kinetic, potential, constraint, total, J.
+    power_in : float
+        ``tau . qd``, W.
+    dissipation : float
+        ``sum Kv Cdot^2`` (penalty), W.
+    segments : ndarray, shape (n, 2, 2), or None
+        Link start/end points for drawing, m (None when taken without geometry).
+    sigma_min : float
+        Smallest singular value of the closure Jacobian (nan when not computed).
+    """
+
+    t: float
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    effort: np.ndarray
+    theta: np.ndarray
+    points: np.ndarray | None
+    closure_force: np.ndarray
+    closure_error: np.ndarray
+    closure_points: np.ndarray
+    energy: np.ndarray
+    power_in: float
+    dissipation: float
+    segments: np.ndarray | None
+    sigma_min: float = field(default=np.nan)
+
+    @property
+    def max_closure_error(self) -> float:
+        """Largest closure residual, m (0 without closures)."""
+        return float(self.closure_error.max()) if self.closure_error.size else 0.0
+
+
+class Simulator:
+    """Fixed-rate simulation of one scene.
+
+    Parameters
+    ----------
+    model : Model
+    settings : SimulationSettings
+    scene_gains : dict, optional
+        Gains from the scene file (``kp``, ``kv``, ``omega_n``, ``zeta``, ``alpha``, ``beta``,
+        per-closure overrides under ``per_closure``); settings take precedence.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        settings: SimulationSettings | None = None,
+        scene_gains: dict | None = None,
+    ):
+        self.model = model
+        self.settings = (settings or SimulationSettings()).validated()
+        self.scene_gains = dict(scene_gains or {})
+        self.dt = 1.0 / self.settings.rate
+        self.h = self.dt / self.settings.substeps
+        self.integrator = (
+            make_integrator(
+                self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
+            )
+            if self._adaptive()
+            else make_integrator(self.settings.integrator)
+        )
+        self.q0, self.qd0 = model.initial_state()
+        self.selection = model.actuator_matrix()
+        self.limits = np.array([a.limit for a in model.actuators], dtype=float)
+        self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
+        self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
+        self.method = self._closure_method()
+        if self.settings.kernel == "numpy":
+            self.mechanism = Mechanism(model, self.method)
+        else:
+            from vjm_ros.core.compiled import (  # numba is imported only here
+                fuse_integrator,
+                make_mechanism,
+            )
+
+            self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
+            self.integrator = fuse_integrator(self.integrator, self.mechanism)
+        self.stiffness_report = self._stiffness_report()
+        if self.settings.check_stiffness:
+            self._check_stiffness()
+        self.divergence_limit = self.settings.divergence_limit
+        if self.divergence_limit is None:
+            scale = max(float(np.max(model.length, initial=0.0)), 0.1)
+            # A quarter of the longest link: the closure has come apart, not merely sagged.
+            self.divergence_limit = 0.25 * scale
+        self.reset()
+
+    # ------------------------------------------------------------------ set-up
+    def _adaptive(self) -> bool:
+        return issubclass(INTEGRATORS[self.settings.integrator], AdaptiveIntegrator)
+
+    def _closure_method(self) -> PenaltyClosure | ExactClosure:
+        s, g = self.settings, self.scene_gains
+        if s.closure == "exact":
+            alpha = s.alpha if s.alpha is not None else g.get("alpha", 20.0)
+            beta = s.beta if s.beta is not None else g.get("beta", 20.0)
+            return ExactClosure(alpha=alpha, beta=beta, projection=s.projection)
+        r = self.model.n_rows
+        kp_raw = s.kp if s.kp is not None else None
+        kv_raw = s.kv if s.kv is not None else None
+        wn = s.omega_n if s.omega_n is not None else None
+        zeta = s.zeta if s.zeta is not None else None
+        if kp_raw is None and wn is None:
+            kp_raw, kv_raw = g.get("kp"), g.get("kv")
+            wn, zeta = g.get("omega_n"), g.get("zeta")
+        if kp_raw is None and wn is None:
+            kp_raw, kv_raw = THESIS_KP, THESIS_KV
+        if kp_raw is not None:
+            kp = np.full(r, float(kp_raw))
+            kv = np.full(r, float(kv_raw if kv_raw is not None else 0.0))
+        else:
+            meff = self._effective_masses()
+            z = float(zeta if zeta is not None else 1.0)
+            kp = meff * float(wn) ** 2
+            kv = 2.0 * z * meff * float(wn)
+        return PenaltyClosure(kp=kp, kv=kv)
+
+    def _mobility_at(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """``G = A M^-1 A^T`` at state ``(q, qd)``, shape (r, r)."""
+        ev = Mechanism(self.model, ExactClosure()).evaluate(q, qd, np.zeros(self.model.n))
+        return closure_mobility(ev.dyn.mass_matrix, ev.closure.jacobian)
+
+    def _initial_mobility(self) -> np.ndarray:
+        """``G`` at the initial state, shape (r, r) (computed once)."""
+        if getattr(self, "_mobility", None) is None:
+            self._mobility = self._mobility_at(self.q0, self.qd0)
+        return self._mobility
+
+    def _effective_masses(self, mobility: np.ndarray | None = None) -> np.ndarray:
+        """Per-row effective mass ``1 / G_ii`` (0 for a row no coordinate moves), shape (r,)."""
+        diag = np.diag(self._initial_mobility() if mobility is None else mobility)
+        with np.errstate(divide="ignore"):
+            return np.where(diag > 0, 1.0 / np.maximum(diag, 1e-300), 0.0)
+
+    def _stiffness_report(self) -> list[dict]:
+        """The coupled closure modes at the initial pose against the method's stability bound.
+
+        Linearized near the closure manifold, the penalty closure error obeys
+        ``Cddot = -G (Kp C + Kv Cdot)`` with ``G = A M^-1 A^T``
+        (:func:`~vjm_ros.core.constraints.penalty_modes`): rows that share links ring together, and
+        a coupled mode can be stiffer than any row alone. Each mode is a damped oscillator
+        ``(omega_n, zeta)``; a fixed step ``h`` carries it while ``omega_n h`` stays within
+        ``integrator.stability_bound(zeta)``, computed from the method's own step (for a
+        Runge-Kutta method the same as ``|R(h mu)| <= 1`` on both roots ``mu`` of the mode).
+        Adaptive methods and ``implicit_euler`` have no bound (``inf``). The pose changes
+        ``G`` as the mechanism moves; the check judges the initial pose only (no cost per tick),
+        and the divergence guard judges the last good poses when a run fails.
+
+        Returns
+        -------
+        list of dict
+            One entry per mode, stiffest first: ``closure`` and ``row`` (the row carrying the
+            largest share of the mode), ``rows``, ``share`` and ``closures`` (the rows that
+            together carry 90 % of it, largest share first, and their closures), ``m_eff``
+            (kg or kg m^2) and ``row_omega_n`` (rad/s) of that row alone, ``omega_n`` (rad/s),
+            ``zeta``, ``omega_h`` (``omega_n h``) and ``bound`` of the mode.
+        """
+        self._step_radius = None
+        if not isinstance(self.method, PenaltyClosure) or self.model.n_rows == 0:
+            return []
+        report, self._step_radius = self._closure_modes(self._initial_mobility())
+        return report
+
+    def _closure_modes(self, g: np.ndarray) -> tuple[list[dict], float | None]:
+        """Report entries of :meth:`_stiffness_report` for mobility ``g``, shape (r, r).
+
+        Returns
+        -------
+        report : list of dict
+        radius : float or None
+            Spectral radius of one step on the coupled closure dynamics, computed only when the
+            gains are not proportional (``Kv != c Kp``) and the method has a finite bound.
+        """
+        kp, kv = self.method.kp, self.method.kv
+        modes = penalty_modes(g, kp, kv)
+        meff = self._effective_masses(g)
+        names = [c.name for c in self.model.closures for _ in range(c.rows)]
+        fixed = self.integrator.fixed_step
+        if fixed and modes.omega_n.size:
+            bounds = self.integrator.stability_bounds(modes.zeta)
+        else:
+            bounds = np.full(modes.omega_n.size, np.inf)
+        radius = None
+        if (
+            fixed
+            and not modes.proportional
+            and modes.stiffness.size
+            and np.isfinite(self.integrator.stability_bound(0.0))
+        ):
+            # Modes of non-proportional gains are not independent oscillators: judge the
+            # method's own step on the coupled system as well.
+            step = self.integrator.step_matrix(modes.stiffness, modes.damping, self.h)
+            radius = float(np.max(np.abs(np.linalg.eigvals(step))))
+        report = []
+        for j, wn in enumerate(modes.omega_n):
+            share = modes.share[j]
+            order = [int(i) for i in np.argsort(-share, kind="stable")]
+            cover = int(np.searchsorted(np.cumsum(share[order]), 0.9 * float(share.sum()))) + 1
+            rows = order[: min(cover, len(order))]
+            top = rows[0]
+            m = float(meff[top])
+            report.append(
+                {
+                    "closure": names[top],
+                    "row": top,
+                    "closures": list(dict.fromkeys(names[i] for i in rows)),
+                    "rows": rows,
+                    "share": [float(share[i]) for i in rows],
+                    "m_eff": m,
+                    "row_omega_n": float(np.sqrt(kp[top] / m)) if m > 0 else float("nan"),
+                    "omega_n": float(wn),
+                    "zeta": float(modes.zeta[j]),
+                    "omega_h": float(wn) * self.h,
+                    "bound": float(bounds[j]),
+                }
+            )
+        return report, radius
+
+    def _check_stiffness(self) -> None:
+        """Raise :class:`StiffnessError` when a closure mode is beyond the method's bound."""
+        report = self.stiffness_report
+        over = [m for m in report if m["omega_h"] > (1.0 - STIFFNESS_MARGIN) * m["bound"]]
+        radius = self._step_radius
+        # A full 2r x 2r step map (non-proportional gains only): its eigenvalues near a double
+        # root carry ~sqrt(eps) error, so growth counts from 1e-6 per step.
+        if not over and (radius is None or radius <= 1.0 + 1e-6):
+            return
+        integ = self.settings.integrator
+        usable = [m for m in report if m["bound"] > 0 and np.isfinite(m["bound"])]
+        need = max(
+            (
+                int(np.ceil(m["omega_n"] * self.dt / ((1.0 - STIFFNESS_MARGIN) * m["bound"])))
+                for m in usable
+            ),
+            default=self.settings.substeps,
+        )
+        hint = (
+            f"use --substeps {need} or more" if need > self.settings.substeps else "use more substeps"
+        ) + ", the implicit_euler integrator, --closure exact, or lower gains"
+        if not over:
+            raise StiffnessError(
+                f"penalty closure modes of {', '.join(repr(c.name) for c in self.model.closures)}:"
+                f" one step of {integ} with h = {self.h:.3g} s amplifies the closure error by "
+                f"{radius:.4g} (spectral radius of the step on the linearized closure dynamics "
+                f"at the initial pose, above 1); {hint}"
+            )
+        worst = max(over, key=lambda m: m["omega_h"] / max(m["bound"], 1e-300))
+        if worst["share"][0] >= 0.99:
+            where = f"closure '{worst['closure']}' row {worst['row']}"
+            alone = ""
+        else:
+            names = worst["closures"]
+            listed = ", ".join(f"'{c}'" for c in names[:4]) + (
+                f" and {len(names) - 4} more" if len(names) > 4 else ""
+            )
+            rows = worst["rows"]
+            shown = ", ".join(str(i) for i in rows[:6]) + (", ..." if len(rows) > 6 else "")
+            where = (
+                f"closure{'s' if len(names) > 1 else ''} {listed} (coupled mode of "
+                f"{len(rows)} row{'s' if len(rows) > 1 else ''}: {shown})"
+            )
+            alone = (
+                f"; row {worst['row']} alone: omega_n = {worst['row_omega_n']:.4g} rad/s"
+                if np.isfinite(worst["row_omega_n"])
+                else ""
+            )
+        side = "beyond" if worst["omega_h"] > worst["bound"] else "on"
+        raise StiffnessError(
+            f"{where}: omega_n = {worst['omega_n']:.4g} rad/s (zeta = {worst['zeta']:.3g}"
+            f"{alone}, effective mass {worst['m_eff']:.4g}) gives omega_n*h = {worst['omega_h']:.3g} with "
+            f"h = {self.h:.3g} s, {side} the stability bound {worst['bound']:.3g} of {integ} (at "
+            f"the initial pose); {hint}"
+        )
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Back to the scene's initial state (t = 0, zero efforts)."""
+        self.t = 0.0
+        self.ticks = 0
+        self._history: collections.deque = collections.deque(maxlen=32)
+        self.q = self.q0.copy()
+        self.qd = self.qd0.copy()
+        self.efforts = np.zeros(len(self.model.actuators))
+        self.tau = np.zeros(self.model.n)
+        self.integrator.reset()
+
+    def set_efforts(self, efforts: np.ndarray) -> np.ndarray:
+        """Hold actuator efforts for the following ticks, clamped to the scene's limits.
+
+        Parameters
+        ----------
+        efforts : array_like, shape (n_actuators,)
+            N m or N, in the scene's actuator order.
+
+        Returns
+        -------
+        ndarray, shape (n_actuators,)
+            The efforts as applied (after clamping).
+        """
+        e = np.asarray(efforts, dtype=float).reshape(-1)
+        if e.shape != (len(self.model.actuators),):
+            raise ConfigurationError(
+                f"efforts: expected {len(self.model.actuators)} values (actuators "
+                f"{self.model.actuator_names}), found {e.size}"
+            )
+        if not np.all(np.isfinite(e)):
+            raise ConfigurationError(f"efforts: expected finite values, found {e.tolist()}")
+        e = np.clip(e, -self.limits, self.limits)
+        self.efforts = e
+        self.tau = self.selection @ e
+        return e
+
+    def advance(self, efforts: np.ndarray | None = None) -> None:
+        """One control tick.
+
+        Parameters
+        ----------
+        efforts : array_like, optional
+            New efforts for this tick (held from now on); the previous ones when omitted.
+
+        Raises
+        ------
+        DivergenceError
+            On a non-finite state or a closure residual beyond the limit.
+        """
+        if efforts is not None:
+            self.set_efforts(efforts)
+        self._history.append((self.t, self.q, self.qd))
+        with np.errstate(all="ignore"):
+            try:
+                q, qd = self.integrator.advance(
+                    self.mechanism,
+                    self.t,
+                    self.q,
+                    self.qd,
+                    self.tau,
+                    self.dt,
+                    self.settings.substeps,
+                )
+            except (FloatingPointError, np.linalg.LinAlgError) as exc:
+                raise DivergenceError(self.t, str(exc), None, self._likely_cause()) from exc
+        self.ticks += 1
+        self.t = self.ticks * self.dt
+        if isinstance(self.method, ExactClosure) and self.method.projection:
+            q, qd = self.mechanism.project(q, qd)
+            self.integrator.reset()
+        self.q, self.qd = q, qd
+        self._guard()
+
+    def _guard(self) -> None:
+        if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd))):
+            raise DivergenceError(
+                self.t, "the state is no longer finite", self._worst_closure(), self._likely_cause()
+            )
+        if self.model.n_rows and self.divergence_limit:
+            if hasattr(self.mechanism, "closure_errors"):
+                err = self.mechanism.closure_errors(self.q)
+            else:
+                terms = self.mechanism.closures.evaluate(
+                    forward_kinematics(self.model, self.q), jacobian=False
+                )
+                err = self.mechanism.closures.errors(terms)
+            worst = int(np.argmax(err))
+            if err[worst] > self.divergence_limit:
+                raise DivergenceError(
+                    self.t,
+                    f"closure residual {err[worst]:.4g} beyond the limit {self.divergence_limit:.4g}",
+                    self.model.closures[worst].name,
+                    self._likely_cause(),
+                )
+
+    def _worst_closure(self) -> str | None:
+        """Closure with the largest residual at the last good state (None without closures)."""
+        if not self.model.n_rows or not self._history:
+            return None
+        _, q, _ = self._history[-1]
+        terms = self.mechanism.closures.evaluate(forward_kinematics(self.model, q), jacobian=False)
+        return self.model.closures[int(np.argmax(self.mechanism.closures.errors(terms)))].name
+
+    def _likely_cause(self) -> str:
+        """Name the likely cause of a divergence, judged at the last good state."""
+        if isinstance(self.method, PenaltyClosure) and self.stiffness_report:
+            # The closure modes stiffen as the pose changes: judge the last good poses too.
+            worst, when = None, 0.0
+            states = [(0.0, self.stiffness_report)] + [
+                (t, self._closure_modes(self._mobility_at(q, qd))[0])
+                for t, q, qd in self._history
+                if t > 0 and np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
+            ]
+            for t, report in states:
+                for mode in report:
+                    ratio = mode["omega_h"] / max(mode["bound"], 1e-12)
+                    if worst is None or ratio > worst["omega_h"] / max(worst["bound"], 1e-12):
+                        worst, when = mode, t
+            if worst is not None and worst["omega_h"] > 0.5 * worst["bound"]:
+                pose = f" at t = {when:.6g} s" if when > 0 else ""
+                return (
+                    f"penalty stiffness against step (omega_n*h = {worst['omega_h']:.3g}, bound "
+                    f"{worst['bound']:.3g} for {self.settings.integrator}{pose}, closure "
+                    f"'{worst['closure']}'); lower the gains, add substeps, or use implicit_euler "
+                    "or --closure exact"
+                )
+        # Judge the pose over the last good ticks: a blow-up leaves the singular pose quickly.
+        worst = None
+        for t, q, qd in self._history:
+            sv = self._singular_values(q, qd)
+            if sv.size and sv[0] > 0:
+                ratio = sv[-1] / sv[0]
+                if worst is None or ratio < worst[0]:
+                    worst = (ratio, t, sv[-1], sv[0])
+        if worst is not None and worst[0] < 1e-3:
+            return (
+                f"a singular pose (closure Jacobian singular values {worst[2]:.2g} to "
+                f"{worst[3]:.2g} at t = {worst[1]:.6g} s); "
+                + (
+                    "exact closure asks for unbounded forces there: start away from the "
+                    "singularity, or use penalty closure, which yields"
+                    if isinstance(self.method, ExactClosure)
+                    else "use --closure exact, a smaller step, or start away from the singularity"
+                )
+            )
+        return "a step too large for the motion; add substeps or use an adaptive integrator"
+
+    def smallest_singular_value(self) -> float:
+        """Smallest singular value of the closure Jacobian at the current pose (nan if none)."""
+        sv = self._singular_values(self.q, self.qd)
+        return float(sv[-1]) if sv.size else float("nan")
+
+    def _singular_values(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Singular values of the closure Jacobian at ``q``, largest first (empty if none)."""
+        if not self.model.n_rows or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            return np.zeros(0)
+        ct = self.mechanism.closures.evaluate(forward_kinematics(self.model, q, qd))
+        return np.linalg.svd(ct.jacobian, compute_uv=False)
+
+    # ------------------------------------------------------------------ outputs
+    def sample(self, singular_values: bool = False, geometry: bool = True) -> Sample:
+        """Evaluate every observable at the current state.
+
+        Parameters
+        ----------
+        singular_values : bool
+            Also compute the smallest singular value of the closure Jacobian.
+        geometry : bool
+            Also compute the named points and the link segments (for drawing and logs); False
+            leaves them None, for outputs that only need forces and energies.
+
+        Returns
+        -------
+        Sample
+        """
+        mech = self.mechanism
+        ev = mech.evaluate(self.q, self.qd, self.tau)
+        kin = ev.dyn.kin
+        model = self.model
+        points = segments = None
+        if geometry:
+            points = (point_positions(kin, self._point_links, self._point_local)
+                      if model.points else np.zeros((0, 2)))
+            segments = link_segments(model, kin)
+        energy = mech.energies(ev, self.qd)
+        dissipation = mech.method.dissipation(ev.closure) if mech.is_penalty else 0.0
+        sigma = np.nan
+        if singular_values and model.n_rows:
+            sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
+        return Sample(
+            t=self.t,
+            q=self.q.copy(),
+            qd=self.qd.copy(),
+            qdd=ev.qdd,
+            effort=self.tau.copy(),
+            theta=kin.theta[: model.n].copy(),
+            points=points,
+            closure_force=mech.closures.closure_forces(ev.closure, ev.row_force),
+            closure_error=mech.closures.errors(ev.closure),
+            closure_points=ev.closure.points,
+            energy=energy,
+            power_in=float(self.tau @ self.qd),
+            dissipation=dissipation,
+            segments=segments,
+            sigma_min=sigma,
+        )
+
+    def describe(self) -> dict:
+        """Run settings as plain data (for summaries and log metadata)."""
+        s = self.settings
+        out = {
+            "scene": self.model.name,
+            "integrator": s.integrator,
+            "closure": s.closure,
+            "rate": s.rate,
+            "substeps": s.substeps,
+            "dt": self.dt,
+            "h": self.h,
+            "kernel": getattr(self.mechanism, "kernel", "numpy"),
+        }
+        if isinstance(self.method, PenaltyClosure):
+            out["kp"] = self.method.kp.tolist()
+            out["kv"] = self.method.kv.tolist()
+        else:
+            out["alpha"] = self.method.alpha
+            out["beta"] = self.method.beta
+            out["projection"] = self.method.projection
+        if not self.integrator.fixed_step:
+            out["rtol"] = s.rtol
+            out["atol"] = s.atol
+        return out
+
+
+def with_overrides(settings: SimulationSettings, **changes) -> SimulationSettings:
+    """A copy of ``settings`` with the non-None ``changes`` applied."""
+    return replace(settings, **{k: v for k, v in changes.items() if v is not None})

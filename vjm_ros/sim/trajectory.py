@@ -1,0 +1,195 @@
+"""In-memory trajectory of a run, its CSV table and its summary measures (docs/design.md section 6).
+
+The columns of ``trajectory.csv`` are a contract (docs/design.md section 5): ``t``; per joint
+``q.<joint>``, ``qd.<joint>``, ``qdd.<joint>``, ``effort.<joint>``; per link ``theta.<link>``; per
+named point ``x.<point>``, ``y.<point>``; per closure ``f.<closure>.x``, ``f.<closure>.y`` (or
+``f.<closure>.z`` for a torque); ``energy.kinetic``, ``energy.potential``, ``energy.constraint``,
+``energy.total``, ``closure_error``.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from vjm_ros.core.model import ANGLE, Model
+from vjm_ros.sim.simulator import Sample
+
+ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
+
+
+class Trajectory:
+    """Samples of one run, stored as growing arrays.
+
+    Parameters
+    ----------
+    model : Model
+    capacity : int
+        Initial number of rows reserved (grows as needed).
+    """
+
+    def __init__(self, model: Model, capacity: int = 1024):
+        self.model = model
+        self._rows = 0
+        n, k = model.n, len(model.closures)
+        self._buf = {
+            "t": np.zeros(capacity),
+            "q": np.zeros((capacity, n)),
+            "qd": np.zeros((capacity, n)),
+            "qdd": np.zeros((capacity, n)),
+            "effort": np.zeros((capacity, n)),
+            "theta": np.zeros((capacity, n)),
+            "points": np.zeros((capacity, len(model.points), 2)),
+            "force": np.zeros((capacity, k, 3)),
+            "error": np.zeros((capacity, k)),
+            "energy": np.zeros((capacity, 4)),
+            "power": np.zeros(capacity),
+            "dissipation": np.zeros(capacity),
+            "segments": np.zeros((capacity, n, 2, 2)),
+        }
+
+    def __len__(self) -> int:
+        return self._rows
+
+    def append(self, s: Sample) -> None:
+        """Store one sample."""
+        if self._rows == len(self._buf["t"]):
+            for key, arr in self._buf.items():
+                self._buf[key] = np.concatenate((arr, np.zeros_like(arr)), axis=0)
+        i = self._rows
+        b = self._buf
+        b["t"][i] = s.t
+        b["q"][i] = s.q
+        b["qd"][i] = s.qd
+        b["qdd"][i] = s.qdd
+        b["effort"][i] = s.effort
+        b["theta"][i] = s.theta
+        b["points"][i] = s.points
+        b["force"][i] = s.closure_force
+        b["error"][i] = s.closure_error
+        b["energy"][i] = s.energy
+        b["power"][i] = s.power_in
+        b["dissipation"][i] = s.dissipation
+        b["segments"][i] = s.segments
+        self._rows += 1
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        """Stored array by name (``t``, ``q``, ``qd``, ``qdd``, ``effort``, ``theta``, ``points``,
+        ``force``, ``error``, ``energy``, ``power``, ``dissipation``, ``segments``)."""
+        return self._buf[key][: self._rows]
+
+    # ------------------------------------------------------------------ measures
+    def closure_error(self) -> np.ndarray:
+        """Largest closure residual per sample, m (rad for angle closures).
+
+        Returns
+        -------
+        ndarray, shape (rows,)
+        """
+        err = self["error"]
+        return err.max(axis=1) if err.shape[1] else np.zeros(len(self))
+
+    def energy_drift(self) -> float:
+        """``max |(T+V)(t) - (T+V)(0)| / max T`` (dimensionless; docs/design.md section 5)."""
+        e = self["energy"]
+        if len(e) == 0:
+            return 0.0
+        tv = e[:, 0] + e[:, 1]
+        scale = float(np.max(e[:, 0]))
+        if scale <= 0:
+            return 0.0 if np.allclose(tv, tv[0]) else float("inf")
+        return float(np.max(np.abs(tv - tv[0])) / scale)
+
+    def energy_balance_residual(self) -> float:
+        """Largest deviation from the energy ledger of docs/design.md section 2, J.
+
+        ``E(t) - E(0) - integral(tau . qd - sum Kv Cdot^2) dt`` with the trapezoid rule over the
+        samples, where ``E = T + V + sum 1/2 Kp C^2``.
+        """
+        if len(self) < 2:
+            return 0.0
+        t = self["t"]
+        rate = self["power"] - self["dissipation"]
+        work = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))))
+        total = self["energy"][:, 3]
+        return float(np.max(np.abs(total - total[0] - work)))
+
+    def summary(self, extra: dict | None = None) -> dict:
+        """The run's measures (closure error, energy drift, ledger residual, finiteness).
+
+        Parameters
+        ----------
+        extra : dict, optional
+            Entries merged in first (settings, timing).
+
+        Returns
+        -------
+        dict
+            JSON-serializable.
+        """
+        out = dict(extra or {})
+        err = self.closure_error()
+        finite = bool(
+            len(self) > 0
+            and np.all(np.isfinite(self["q"]))
+            and np.all(np.isfinite(self["qd"]))
+            and np.all(np.isfinite(self["energy"]))
+        )
+        out.update(
+            {
+                "sim_time": float(self["t"][-1]) if len(self) else 0.0,
+                "max_closure_error": float(err.max()) if err.size else 0.0,
+                "rms_closure_error": float(np.sqrt(np.mean(err**2))) if err.size else 0.0,
+                "energy_drift": self.energy_drift(),
+                "energy_balance_residual": self.energy_balance_residual(),
+                "finite": finite,
+            }
+        )
+        return out
+
+    # ------------------------------------------------------------------ CSV
+    def columns(self) -> list[str]:
+        """Column names of the CSV table, in order."""
+        m = self.model
+        cols = ["t"]
+        for j in m.joint_names:
+            cols += [f"q.{j}", f"qd.{j}", f"qdd.{j}", f"effort.{j}"]
+        cols += [f"theta.{lk}" for lk in m.link_names]
+        for p in m.points:
+            cols += [f"x.{p.name}", f"y.{p.name}"]
+        for c in m.closures:
+            cols += [f"f.{c.name}.z"] if c.kind == ANGLE else [f"f.{c.name}.x", f"f.{c.name}.y"]
+        cols += [f"energy.{e}" for e in ENERGY_NAMES] + ["closure_error"]
+        return cols
+
+    def table(self) -> np.ndarray:
+        """All columns as one array.
+
+        Returns
+        -------
+        ndarray, shape (rows, len(columns()))
+        """
+        m, rows = self.model, len(self)
+        parts = [self["t"][:, None]]
+        per_joint = np.stack((self["q"], self["qd"], self["qdd"], self["effort"]), axis=2)
+        parts.append(per_joint.reshape(rows, -1))
+        parts.append(self["theta"])
+        parts.append(self["points"].reshape(rows, -1))
+        for k, c in enumerate(m.closures):
+            f = self["force"][:, k]
+            parts.append(f[:, 2:3] if c.kind == ANGLE else f[:, :2])
+        parts.append(self["energy"])
+        parts.append(self.closure_error()[:, None])
+        return np.concatenate(parts, axis=1)
+
+    def write_csv(self, path: str | Path) -> Path:
+        """Write ``trajectory.csv`` (full double precision)."""
+        path = Path(path)
+        with path.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(self.columns())
+            for row in self.table():
+                w.writerow([repr(float(x)) for x in row])
+        return path

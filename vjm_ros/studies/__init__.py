@@ -1,0 +1,1 @@
+"""Measurements of the simulator: the speed/accuracy bench and the MuJoCo comparison."""
