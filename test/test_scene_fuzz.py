@@ -44,11 +44,11 @@ from vjm_ros.scene.loader import (
     MAX_SCENE_BYTES,
     TOP_KEY,
     Scene,
-    _SceneLoader,
     builtin_scene_text,
     builtin_scenes,
     load_scene,
 )
+from vjm_ros.scene.safe_yaml import SceneLoader
 
 # A hang guard, not a speed target: the slowest fuzz case loads in ~0.04 s here and the largest
 # scene in ~0.01 s, so 20 s (500x) only trips on a runaway (super-linear) load, on any machine.
@@ -58,7 +58,7 @@ SLOW_CASES = 1200
 
 BUILTINS = builtin_scenes()
 BUILTIN_DOCS = {
-    name: yaml.load(builtin_scene_text(name), Loader=_SceneLoader)  # noqa: S506 (safe loader)
+    name: yaml.load(builtin_scene_text(name), Loader=SceneLoader)  # noqa: S506 (safe loader)
     for name in BUILTINS
 }
 
@@ -69,7 +69,7 @@ class _Dumper(yaml.SafeDumper):
     """Writes strings that the scene loader would read as numbers (``1e5``) in quotes."""
 
 
-_Dumper.yaml_implicit_resolvers = _SceneLoader.yaml_implicit_resolvers
+_Dumper.yaml_implicit_resolvers = SceneLoader.yaml_implicit_resolvers
 
 
 def dump(doc, flow: bool = False) -> bytes:
@@ -628,7 +628,7 @@ def _reference(case: Case):
     if case.doc is not None:
         return case.doc
     try:
-        return yaml.load(case.data.decode("utf-8"), Loader=_SceneLoader)  # noqa: S506
+        return yaml.load(case.data.decode("utf-8"), Loader=SceneLoader)  # noqa: S506
     except (UnicodeDecodeError, yaml.YAMLError, RecursionError):
         return None
 

@@ -1,0 +1,556 @@
+"""Scene documents to models: every key validated, errors naming the key path.
+
+:class:`SceneBuilder` walks a YAML document once (after :mod:`vjm_ros.scene.safe_yaml` has read
+it), builds the :class:`~vjm_ros.core.model.Model`, checks the inertia and closes the closures
+(assembly); :class:`Scene` is what it returns.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import reprlib
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vjm_ros.core.dynamics import mass_matrix
+from vjm_ros.core.errors import SceneError
+from vjm_ros.core.model import (
+    CLOSURE_KINDS,
+    GROUND,
+    HINGE,
+    JOINT_KINDS,
+    SLIDER,
+    Actuator,
+    Chain,
+    Closure,
+    Joint,
+    Link,
+    Model,
+    NamedPoint,
+    PointRef,
+)
+from vjm_ros.scene.assembly import assemble, closure_residual
+from vjm_ros.scene.limits import (
+    DEFAULT_CLOSURE_TOLERANCE,
+    MAX_CLOSURES,
+    MAX_LINKS,
+    MAX_MAGNITUDE,
+    MAX_STRING,
+    TOP_KEY,
+    TOP_KEYS,
+)
+
+_SHORT = reprlib.Repr()
+_SHORT.maxlevel = 3
+_SHORT.maxlist = _SHORT.maxdict = _SHORT.maxset = _SHORT.maxtuple = 4
+_SHORT.maxstring = _SHORT.maxother = 60
+
+
+@dataclass
+class Scene:
+    """A loaded scene.
+
+    Attributes
+    ----------
+    model : Model
+        Closed (assembled) initial state included.
+    source : str
+        File path or built-in name.
+    text : str
+        The YAML text.
+    gains : dict
+        Default closure method and gains (``method``, ``kp``, ``kv``, ``omega_n``, ``zeta``,
+        ``alpha``, ``beta``, ``projection``).
+    defaults : dict
+        Default run settings (``integrator``, ``rate``, ``substeps``, ``duration``).
+    assembly_residual : float
+        ``max |C|`` at t = 0 after loading, m or rad.
+    """
+
+    model: Model
+    source: str
+    text: str
+    gains: dict = field(default_factory=dict)
+    defaults: dict = field(default_factory=dict)
+    assembly_residual: float = 0.0
+
+    @property
+    def name(self) -> str:
+        """Scene name."""
+        return self.model.name
+
+
+def _shown(value: object) -> object:
+    """``value`` itself, or a stand-in with a bounded ``repr`` for collections.
+
+    YAML aliases can make a small file hold a collection whose full ``repr`` is astronomically long
+    (or self-referencing); error messages print this stand-in instead.
+    """
+    if isinstance(value, (list, dict, set, tuple)):
+        return _Excerpt(_SHORT.repr(value))
+    return value
+
+
+class _Excerpt:
+    """Prints as the excerpt it was made with (see :func:`_shown`)."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __repr__(self) -> str:
+        return self.text
+
+
+def _worst_closure(model: Model, residual: np.ndarray) -> tuple[int, float]:
+    """Index and residual size (norm over its rows) of the least satisfied closure."""
+    rows = [k for k, c in enumerate(model.closures) for _ in range(c.rows)]
+    size = np.zeros(len(model.closures))
+    with np.errstate(over="ignore"):
+        np.add.at(size, rows, np.where(np.isfinite(residual), residual, np.inf) ** 2)
+    k = int(np.argmax(size))
+    return k, float(np.sqrt(size[k]))
+
+
+def _listing(names, limit: int = 12) -> str:
+    """``a, b, c``: at most ``limit`` names, then the count of the others."""
+    names = list(names)
+    more = f", ... ({len(names) - limit} more)" if len(names) > limit else ""
+    return ", ".join(names[:limit]) + more
+
+
+def _key(parent: str, child: str) -> str:
+    """Key path of ``child`` under ``parent``: ``a.b``, or ``a['b c']`` for an unusual key."""
+    if re.fullmatch(r"[A-Za-z_]\w*", child, re.ASCII):
+        return f"{parent}.{child}" if parent else child
+    return f"{parent}[{child!r}]"
+
+
+
+
+class SceneBuilder:
+    """Walks the document once, validating as it goes.
+
+    Parameters
+    ----------
+    source : str
+        File name for error messages.
+    text : str
+        The YAML text, kept with the model.
+    """
+
+    def __init__(self, source: str, text: str):
+        self.source = source
+        self.text = text
+        self.angle_scale = 1.0
+        self.links: list[Link] = []
+        self.link_index: dict[str, int] = {}
+        self.link_key: list[str] = []
+        self.joint_index: dict[str, int] = {}
+
+    # -------------------------------------------------------------- primitives
+    def fail(self, key: str, expected: str, found: object = ...) -> SceneError:
+        """The error to raise for ``key``."""
+        return SceneError(self.source, key, expected, _shown(found))
+
+    def require(self, value: dict, name: str, key: str, expected: str = "a required key"):
+        """``value[name]``, or an error naming the missing key."""
+        if name not in value:
+            raise self.fail(_key(key, name), expected, "missing")
+        return value[name]
+
+    def mapping(self, value, key: str, allowed: set[str] | None = None) -> dict:
+        """``value`` if it is a mapping with string keys out of ``allowed``."""
+        if not isinstance(value, dict):
+            raise self.fail(key or TOP_KEY, "a mapping", value)
+        for k in value:
+            if not isinstance(k, str):
+                raise self.fail(key or TOP_KEY, "string keys", k)
+            if allowed is not None and k not in allowed:
+                raise self.fail(_key(key, k), f"one of the keys {sorted(allowed)}", k)
+        return value
+
+    def section(self, doc: dict, name: str) -> object:
+        """An optional top-level list or mapping; empty (``null``) counts as absent."""
+        value = doc.get(name)
+        if value is None:
+            return {} if name in ("closure_method", "defaults", "units") else []
+        return value
+
+    def sequence(self, value, key: str, min_len: int = 0, max_len: int = MAX_LINKS) -> list:
+        """``value`` if it is a list of ``min_len`` to ``max_len`` entries."""
+        if not isinstance(value, list):
+            raise self.fail(key, "a list", value)
+        if len(value) < min_len:
+            raise self.fail(key, f"a list of at least {min_len} entries", value)
+        if len(value) > max_len:
+            raise self.fail(key, f"a list of at most {max_len} entries", f"{len(value)} entries")
+        return value
+
+    def number(
+        self, value, key: str, minimum: float | None = None, positive: bool = False
+    ) -> float:
+        """``value`` as a finite float within :data:`MAX_MAGNITUDE` and the given bounds."""
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, "a number", value)
+        if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:  # float() could overflow
+            raise self.fail(key, f"a finite number of magnitude at most {MAX_MAGNITUDE:g}", value)
+        v = float(value)
+        if not math.isfinite(v) or abs(v) > MAX_MAGNITUDE:
+            raise self.fail(key, f"a finite number of magnitude at most {MAX_MAGNITUDE:g}", value)
+        if positive and v <= 0:
+            raise self.fail(key, "a number > 0", value)
+        if minimum is not None and v < minimum:
+            raise self.fail(key, f"a number >= {minimum:g}", value)
+        return v
+
+    def angle(self, value, key: str) -> float:
+        """An angle in the scene's unit, in radians."""
+        return self.number(value, key) * self.angle_scale
+
+    def vector(self, value, key: str) -> tuple[float, float]:
+        """A planar vector ``[x, y]``."""
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(key, "a list of two numbers [x, y]", value)
+        return (self.number(value[0], f"{key}[0]"), self.number(value[1], f"{key}[1]"))
+
+    def string(self, value, key: str) -> str:
+        """A non-empty string of at most :data:`MAX_STRING` characters."""
+        if not isinstance(value, str) or not value.strip():
+            raise self.fail(key, "a non-empty string", value)
+        if len(value) > MAX_STRING:
+            raise self.fail(key, f"a string of at most {MAX_STRING} characters", value)
+        return value
+
+    def name(self, value, key: str) -> str:
+        """An identifier: letters, digits and ``_``, not starting with a digit."""
+        s = self.string(value, key)
+        if not all(ch.isalnum() or ch == "_" for ch in s) or s[0].isdigit():
+            raise self.fail(key, "a name of letters, digits and '_' (not starting with a digit)", s)
+        return s
+
+    def choice(self, value, key: str, options) -> str:
+        """One of the strings ``options``."""
+        if not isinstance(value, str) or value not in options:
+            raise self.fail(key, f"one of {list(options)}", value)
+        return value
+
+    # -------------------------------------------------------------- document
+    def build(self, doc) -> Scene:
+        """The scene described by the document ``doc``."""
+        doc = self.mapping(doc, "", TOP_KEYS)
+        name = self.name(self.require(doc, "name", ""), "name")
+        self.require(doc, "chains", "")
+        units = self.mapping(self.section(doc, "units"), "units", {"angle"})
+        unit = units.get("angle", "radians")
+        if unit not in ("degrees", "radians"):
+            raise self.fail("units.angle", "'degrees' or 'radians'", unit)
+        self.angle_scale = math.pi / 180.0 if unit == "degrees" else 1.0
+        for k in ("description", "provenance"):
+            if k in doc and not isinstance(doc[k], str):
+                raise self.fail(k, "a string", doc[k])
+        gravity = self.vector(doc.get("gravity", [0.0, -9.81]), "gravity")
+
+        chains, links, joints = self.chains(doc["chains"])
+        self.links = links
+        self.link_index = {lk.name: i for i, lk in enumerate(links)}
+        self.joint_index = {j.name: i for i, j in enumerate(joints)}
+        closures = self.closures(self.section(doc, "closures"))
+        actuators = self.actuators(self.section(doc, "actuators"))
+        points = self.points(self.section(doc, "points"), chains, links)
+        gains = self.gains(self.section(doc, "closure_method"))
+        defaults = self.defaults(self.section(doc, "defaults"))
+        model = Model.build(
+            name, tuple(chains), tuple(links), tuple(joints), tuple(closures), tuple(actuators),
+            tuple(points), gravity, self.text,
+            {"description": doc.get("description", ""), "provenance": doc.get("provenance", "")},
+        )
+        self.check_inertia(model)
+        model, residual = self.close(model, doc.get("assemble"))
+        return Scene(model, self.source, self.text, gains, defaults, residual)
+
+    def chains(self, value):
+        """Chains, links and joints, in scene order."""
+        value = self.sequence(value, "chains", min_len=1)
+        chains, links, joints = [], [], []
+        chain_names, link_names, joint_names = set(), set(), set()
+        for c, ch in enumerate(value):
+            key = f"chains[{c}]"
+            ch = self.mapping(ch, key, {"name", "origin", "angle", "length", "links"})
+            lks = self.require(ch, "links", key)
+            cname = self.name(ch.get("name", f"chain{c + 1}"), f"{key}.name")
+            if cname in chain_names:
+                raise self.fail(f"{key}.name", "a chain name used once", cname)
+            chain_names.add(cname)
+            origin = self.vector(ch.get("origin", [0.0, 0.0]), f"{key}.origin")
+            base_angle = self.angle(ch.get("angle", 0.0), f"{key}.angle")
+            base_len = self.number(ch.get("length", 0.0), f"{key}.length", minimum=0.0)
+            lks = self.sequence(lks, f"{key}.links", min_len=1)
+            if len(links) + len(lks) > MAX_LINKS:
+                raise self.fail(
+                    f"{key}.links", f"at most {MAX_LINKS} links in a scene",
+                    f"{len(links) + len(lks)} links",
+                )
+            idx = []
+            prev_angle = base_angle
+            for i, lk in enumerate(lks):
+                lkey = f"{key}.links[{i}]"
+                lk = self.mapping(lk, lkey, {"name", "length", "mass", "inertia", "com", "joint"})
+                lname = self.name(lk.get("name", f"{cname}_link{i + 2}"), f"{lkey}.name")
+                if lname in link_names:
+                    raise self.fail(f"{lkey}.name", "a link name used once in the scene", lname)
+                link_names.add(lname)
+                raw_length = self.require(lk, "length", lkey)
+                length = self.number(raw_length, f"{lkey}.length", minimum=0.0)
+                jt = self.require(lk, "joint", lkey)
+                mass = self.number(lk.get("mass", 1.0), f"{lkey}.mass", minimum=0.0)
+                inertia = self.number(lk.get("inertia", 0.0), f"{lkey}.inertia", minimum=0.0)
+                com = self.vector(lk.get("com", [length / 2.0, 0.0]), f"{lkey}.com")
+                jkey = f"{lkey}.joint"
+                jt = self.mapping(jt, jkey, {"name", "type", "angle", "slide", "velocity"})
+                jname = self.name(jt.get("name", f"{cname}_joint{i + 1}"), f"{jkey}.name")
+                if jname in joint_names:
+                    raise self.fail(f"{jkey}.name", "a joint name used once in the scene", jname)
+                joint_names.add(jname)
+                kind = self.choice(self.require(jt, "type", jkey), f"{jkey}.type", JOINT_KINDS)
+                absolute = self.angle(jt.get("angle", 0.0), f"{jkey}.angle")
+                slide = self.number(jt.get("slide", 0.0), f"{jkey}.slide")
+                rate_raw = jt.get("velocity", 0.0)
+                rate = (
+                    self.angle(rate_raw, f"{jkey}.velocity")
+                    if kind == "revolute"
+                    else self.number(rate_raw, f"{jkey}.velocity")
+                )
+                joints.append(Joint(jname, kind, absolute - prev_angle, slide, rate))
+                links.append(Link(lname, c, length, mass, inertia, com))
+                self.link_key.append(lkey)
+                idx.append(len(links) - 1)
+                prev_angle = absolute
+            chains.append(Chain(cname, origin, base_angle, base_len, tuple(idx)))
+        return chains, links, joints
+
+    def link_ref(self, value, key: str) -> int:
+        """Index of the link named ``value``."""
+        lname = self.string(value, key)
+        if lname not in self.link_index:
+            raise self.fail(key, f"a link of the scene ({_listing(self.link_index)})", lname)
+        return self.link_index[lname]
+
+    def point(self, value, key: str) -> PointRef:
+        """A ground point ``{ground: [x, y]}`` or a link point ``{link: L, at: ...}``."""
+        value = self.mapping(value, key, {"link", "at", "ground"})
+        if "ground" in value:
+            if "link" in value or "at" in value:
+                raise self.fail(key, "either 'ground' or 'link'/'at', not both", sorted(value))
+            return PointRef(GROUND, self.vector(value["ground"], f"{key}.ground"))
+        li = self.link_ref(
+            self.require(value, "link", key, "a required key (or 'ground: [x, y]')"), f"{key}.link"
+        )
+        at = value.get("at", "tip")
+        length = self.links[li].length
+        if at == "tip":
+            local = (length, 0.0)
+        elif at == "origin":
+            local = (0.0, 0.0)
+        elif at == "com":
+            local = self.links[li].com
+        elif isinstance(at, list):
+            local = self.vector(at, f"{key}.at")
+        else:
+            raise self.fail(f"{key}.at", "'tip', 'origin', 'com' or [s, w] in the link frame", at)
+        return PointRef(li, local)
+
+    def closures(self, value):
+        """The closures (docs/design.md section 2)."""
+        value = self.sequence(value, "closures", max_len=MAX_CLOSURES)
+        out, names = [], set()
+        for k, cl in enumerate(value):
+            key = f"closures[{k}]"
+            cl = self.mapping(
+                cl, key, {"name", "type", "point", "target", "line", "link", "offset", "gains"}
+            )
+            kind = self.choice(self.require(cl, "type", key), f"{key}.type", CLOSURE_KINDS)
+            cname = self.name(cl.get("name", f"{kind}{k + 1}"), f"{key}.name")
+            if cname in names:
+                raise self.fail(f"{key}.name", "a closure name used once", cname)
+            names.add(cname)
+            if "gains" in cl:
+                raise self.fail(
+                    f"{key}.gains", "gains under the top-level 'closure_method'", cl["gains"]
+                )
+            if kind == HINGE:
+                point, target = self.require(cl, "point", key), self.require(cl, "target", key)
+                pa = self.point(point, f"{key}.point")
+                pb = self.point(target, f"{key}.target")
+                if pa.link == GROUND:
+                    raise self.fail(f"{key}.point", "a point on a link", "ground")
+                out.append(Closure(cname, kind, pa, pb))
+            elif kind == SLIDER:
+                point, line = self.require(cl, "point", key), self.require(cl, "line", key)
+                pa = self.point(point, f"{key}.point")
+                line = self.mapping(line, f"{key}.line", {"ground", "link", "at", "direction"})
+                raw_d = self.require(line, "direction", f"{key}.line", "a required key [dx, dy]")
+                d = np.array(self.vector(raw_d, f"{key}.line.direction"))
+                norm = float(np.hypot(*d))
+                if norm < 1e-12:
+                    raise self.fail(f"{key}.line.direction", "a non-zero vector", raw_d)
+                p0 = self.point({k: v for k, v in line.items() if k != "direction"}, f"{key}.line")
+                out.append(Closure(cname, kind, pa, p0, tuple(d / norm)))
+            else:
+                la = self.link_ref(self.require(cl, "link", key), f"{key}.link")
+                tkey = f"{key}.target"
+                tgt = self.mapping(cl.get("target", {"ground": True}), tkey, {"ground", "link"})
+                if ("ground" in tgt) == ("link" in tgt):
+                    raise self.fail(tkey, "either 'ground: true' or 'link: NAME'", tgt)
+                if "ground" in tgt and tgt["ground"] is not True:
+                    raise self.fail(f"{tkey}.ground", "true", tgt["ground"])
+                lb = GROUND if "link" not in tgt else self.link_ref(tgt["link"], f"{tkey}.link")
+                offset = self.angle(cl.get("offset", 0.0), f"{key}.offset")
+                out.append(Closure(cname, kind, PointRef(la, (0.0, 0.0)), PointRef(lb, (0.0, 0.0)),
+                                   offset=offset))
+        return out
+
+    def joint_ref(self, value, key: str) -> int:
+        """Index of the joint named ``value``."""
+        jname = self.string(value, key)
+        if jname not in self.joint_index:
+            raise self.fail(key, f"a joint of the scene ({_listing(self.joint_index)})", jname)
+        return self.joint_index[jname]
+
+    def actuators(self, value):
+        """Actuators, one per actuated joint."""
+        value = self.sequence(value, "actuators")
+        out, seen = [], set()
+        for k, ac in enumerate(value):
+            key = f"actuators[{k}]"
+            ac = self.mapping(ac, key, {"joint", "limit", "effort"})
+            joint = self.joint_ref(self.require(ac, "joint", key), f"{key}.joint")
+            if joint in seen:
+                raise self.fail(f"{key}.joint", "a joint actuated once", ac["joint"])
+            seen.add(joint)
+            limit = self.number(ac.get("limit", MAX_MAGNITUDE), f"{key}.limit", positive=True)
+            effort = self.number(ac.get("effort", 0.0), f"{key}.effort")
+            if abs(effort) > limit:
+                raise self.fail(f"{key}.effort", f"a value within the limit +-{limit:g}", effort)
+            out.append(Actuator(joint, limit, effort))
+        return out
+
+    def points(self, value, chains, links):
+        """Chain tips plus the named points of the scene."""
+        out = [
+            NamedPoint(f"{ch.name}_tip", PointRef(ch.links[-1], (links[ch.links[-1]].length, 0.0)))
+            for ch in chains
+        ]
+        names = {p.name for p in out}
+        value = self.sequence(value, "points")
+        for k, pt in enumerate(value):
+            key = f"points[{k}]"
+            pt = self.mapping(pt, key, {"name", "link", "at"})
+            pname = self.name(self.require(pt, "name", key), f"{key}.name")
+            if pname in names:
+                raise self.fail(
+                    f"{key}.name", "a point name used once (chain tips are '<chain>_tip')", pname
+                )
+            names.add(pname)
+            ref = self.point({k2: v for k2, v in pt.items() if k2 != "name"}, key)
+            out.append(NamedPoint(pname, ref))
+        return out
+
+    def gains(self, value) -> dict:
+        """The ``closure_method`` section."""
+        allowed = {"method", "kp", "kv", "omega_n", "zeta", "alpha", "beta", "projection"}
+        value = self.mapping(value, "closure_method", allowed)
+        out = {}
+        out["method"] = self.choice(
+            value.get("method", "penalty"), "closure_method.method", ("penalty", "exact")
+        )
+        for k in ("kp", "kv", "omega_n", "zeta", "alpha", "beta"):
+            if k in value:
+                out[k] = self.number(value[k], f"closure_method.{k}", minimum=0.0)
+        if "kp" in out and "omega_n" in out:
+            raise self.fail(
+                "closure_method", "either kp/kv or omega_n/zeta, not both", sorted(value)
+            )
+        for k, needs in (("kv", "kp"), ("zeta", "omega_n")):
+            if k in out and needs not in out:
+                raise self.fail(f"closure_method.{k}", f"'{k}' together with '{needs}'", value[k])
+        if "projection" in value:
+            if not isinstance(value["projection"], bool):
+                raise self.fail("closure_method.projection", "true or false", value["projection"])
+            out["projection"] = value["projection"]
+        return out
+
+    def defaults(self, value) -> dict:
+        """The ``defaults`` section (run settings)."""
+        from vjm_ros.core.integrators import INTEGRATORS
+
+        value = self.mapping(value, "defaults", {"integrator", "rate", "substeps", "duration"})
+        out = {}
+        if "integrator" in value:
+            out["integrator"] = self.choice(value["integrator"], "defaults.integrator", INTEGRATORS)
+        if "rate" in value:
+            out["rate"] = self.number(value["rate"], "defaults.rate", positive=True)
+        if "substeps" in value:
+            s = value["substeps"]
+            if isinstance(s, bool) or not isinstance(s, int) or s < 1 or s > 10000:
+                raise self.fail("defaults.substeps", "a whole number from 1 to 10000", s)
+            out["substeps"] = s
+        if "duration" in value:
+            out["duration"] = self.number(value["duration"], "defaults.duration", positive=True)
+        return out
+
+    # -------------------------------------------------------------- checks on the model
+    def check_inertia(self, model: Model) -> None:
+        """Refuse a singular mass matrix, naming the link whose joint has no inertia."""
+        q, _ = model.initial_state()
+        with np.errstate(all="ignore"):
+            m = mass_matrix(model, q)
+            ok = bool(np.all(np.isfinite(m)))
+            ev = np.linalg.eigvalsh(m) if ok else np.array([np.nan])
+        if ok and ev[0] > 1e-12 * max(float(ev[-1]), 1e-300):
+            return
+        worst = int(np.argmax(np.abs(np.linalg.eigh(m)[1][:, 0]))) if ok else 0
+        which = [lk.name for lk in model.links if lk.mass == 0 and lk.inertia == 0]
+        raise self.fail(
+            self.link_key[worst],
+            f"some mass or inertia moved by joint '{model.joints[worst].name}' (a positive "
+            f"definite mass matrix; links without mass or inertia: {_listing(which) or 'none'})",
+            f"smallest eigenvalue {float(ev[0]):.3g}",
+        )
+
+    def close(self, model: Model, spec) -> tuple[Model, float]:
+        """Check the closures at t = 0, or assemble them if the scene asks for it."""
+        if spec is None:
+            q, _ = model.initial_state()
+            res = closure_residual(model, q)
+            err = float(np.max(np.abs(res))) if res.size else 0.0
+            if not err <= DEFAULT_CLOSURE_TOLERANCE:
+                k, size = _worst_closure(model, res)
+                raise self.fail(
+                    f"closures[{k}]",
+                    f"closures that hold at t = 0 within {DEFAULT_CLOSURE_TOLERANCE:g} "
+                    "(or an 'assemble' section)",
+                    f"residual {size:.3g} at '{model.closures[k].name}'",
+                )
+            return model, err
+        spec = self.mapping(spec, "assemble", {"fixed", "tolerance"})
+        fixed_names = self.sequence(spec.get("fixed", []), "assemble.fixed")
+        fixed = [self.joint_ref(jn, f"assemble.fixed[{k}]") for k, jn in enumerate(fixed_names)]
+        tol = self.number(spec.get("tolerance", 1e-10), "assemble.tolerance", positive=True)
+        with np.errstate(all="ignore"):
+            try:
+                q, qd, err = assemble(model, fixed, tol)
+            except np.linalg.LinAlgError as exc:
+                raise self.fail(
+                    "assemble", "geometry that can be assembled", f"linear algebra failure: {exc}"
+                ) from None
+        if not err <= tol or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+            k, size = _worst_closure(model, closure_residual(model, q))
+            raise self.fail(
+                f"closures[{k}]",
+                f"geometry that assembly can close to within {tol:g} from the given guesses "
+                "(check lengths, targets and the fixed joints)",
+                f"residual {size:.3g} at '{model.closures[k].name}' after assembly",
+            )
+        return model.with_state(q, qd), err
