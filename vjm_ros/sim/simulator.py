@@ -12,28 +12,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from vjm_ros.core.constraints import (
-    ExactClosure,
-    PenaltyClosure,
-    closure_mobility,
-    penalty_modes,
-)
-from vjm_ros.core.errors import ConfigurationError, DivergenceError, StiffnessError
+from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
+from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
-
-THESIS_KP = 1e5
-"""The thesis's closure stiffness (Tables 4.1-4.5, printed as "Ns/m"), N/m."""
-THESIS_KV = 100.0
-"""The thesis's closure damping, N s/m."""
-
-STIFFNESS_MARGIN = 1e-6
-"""Relative margin below a stability bound: a closure mode whose ``omega_n h`` comes within it of
-the bound is refused. On the bound the linearized closure error neither grows nor decays, and
-the changing pose tips it over (double_slider with semi-implicit Euler at ``Kp h (h + 2 Kv/Kp)
-= 4 m_eff`` exactly diverges within 0.4 s)."""
+from vjm_ros.sim.stiffness import (
+    check_stiffness,
+    closure_method,
+    closure_modes,
+    mobility_at,
+)
 
 
 @dataclass(frozen=True)
@@ -207,7 +197,8 @@ class Simulator:
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
-        self.method = self._closure_method()
+        self.method = closure_method(model, self.settings, self.scene_gains,
+                                     self._initial_mobility)
         if self.settings.kernel == "numpy":
             self.mechanism = Mechanism(model, self.method)
         else:
@@ -218,9 +209,14 @@ class Simulator:
 
             self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
             self.integrator = fuse_integrator(self.integrator, self.mechanism)
-        self.stiffness_report = self._stiffness_report()
+        self.stiffness_report, radius = [], None
+        if isinstance(self.method, PenaltyClosure) and model.n_rows:
+            self.stiffness_report, radius = closure_modes(
+                model, self.method, self.integrator, self.h, self._initial_mobility()
+            )
         if self.settings.check_stiffness:
-            self._check_stiffness()
+            check_stiffness(self.stiffness_report, radius, model, self.settings.integrator,
+                            self.h, self.settings.substeps)
         self.divergence_limit = self.settings.divergence_limit
         if self.divergence_limit is None:
             scale = max(float(np.max(model.length, initial=0.0)), 0.1)
@@ -232,188 +228,16 @@ class Simulator:
     def _adaptive(self) -> bool:
         return issubclass(INTEGRATORS[self.settings.integrator], AdaptiveIntegrator)
 
-    def _closure_method(self) -> PenaltyClosure | ExactClosure:
-        s, g = self.settings, self.scene_gains
-        if s.closure == "exact":
-            alpha = s.alpha if s.alpha is not None else g.get("alpha", 20.0)
-            beta = s.beta if s.beta is not None else g.get("beta", 20.0)
-            return ExactClosure(alpha=alpha, beta=beta, projection=s.projection)
-        r = self.model.n_rows
-        kp_raw = s.kp if s.kp is not None else None
-        kv_raw = s.kv if s.kv is not None else None
-        wn = s.omega_n if s.omega_n is not None else None
-        zeta = s.zeta if s.zeta is not None else None
-        if kp_raw is None and wn is None:
-            kp_raw, kv_raw = g.get("kp"), g.get("kv")
-            wn, zeta = g.get("omega_n"), g.get("zeta")
-        if kp_raw is None and wn is None:
-            kp_raw, kv_raw = THESIS_KP, THESIS_KV
-        if kp_raw is not None:
-            kp = np.full(r, float(kp_raw))
-            kv = np.full(r, float(kv_raw if kv_raw is not None else 0.0))
-        else:
-            meff = self._effective_masses()
-            z = float(zeta if zeta is not None else 1.0)
-            kp = meff * float(wn) ** 2
-            kv = 2.0 * z * meff * float(wn)
-        return PenaltyClosure(kp=kp, kv=kv)
-
-    def _mobility_at(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """``G = A M^-1 A^T`` at state ``(q, qd)``, shape (r, r)."""
-        ev = Mechanism(self.model, ExactClosure()).evaluate(q, qd, np.zeros(self.model.n))
-        return closure_mobility(ev.dyn.mass_matrix, ev.closure.jacobian)
-
     def _initial_mobility(self) -> np.ndarray:
-        """``G`` at the initial state, shape (r, r) (computed once)."""
+        """``G = A M^-1 A^T`` at the initial state, shape (r, r) (computed once)."""
         if getattr(self, "_mobility", None) is None:
-            self._mobility = self._mobility_at(self.q0, self.qd0)
+            self._mobility = mobility_at(self.model, self.q0, self.qd0)
         return self._mobility
 
-    def _effective_masses(self, mobility: np.ndarray | None = None) -> np.ndarray:
-        """Per-row effective mass ``1 / G_ii`` (0 for a row no coordinate moves), shape (r,)."""
-        diag = np.diag(self._initial_mobility() if mobility is None else mobility)
-        with np.errstate(divide="ignore"):
-            return np.where(diag > 0, 1.0 / np.maximum(diag, 1e-300), 0.0)
-
-    def _stiffness_report(self) -> list[dict]:
-        """The coupled closure modes at the initial pose against the method's stability bound.
-
-        Linearized near the closure manifold, the penalty closure error obeys
-        ``Cddot = -G (Kp C + Kv Cdot)`` with ``G = A M^-1 A^T``
-        (:func:`~vjm_ros.core.constraints.penalty_modes`): rows that share links ring together, and
-        a coupled mode can be stiffer than any row alone. Each mode is a damped oscillator
-        ``(omega_n, zeta)``; a fixed step ``h`` carries it while ``omega_n h`` stays within
-        ``integrator.stability_bound(zeta)``, computed from the method's own step (for a
-        Runge-Kutta method the same as ``|R(h mu)| <= 1`` on both roots ``mu`` of the mode).
-        Adaptive methods and ``implicit_euler`` have no bound (``inf``). The pose changes
-        ``G`` as the mechanism moves; the check judges the initial pose only (no cost per tick),
-        and the divergence guard judges the last good poses when a run fails.
-
-        Returns
-        -------
-        list of dict
-            One entry per mode, stiffest first: ``closure`` and ``row`` (the row carrying the
-            largest share of the mode), ``rows``, ``share`` and ``closures`` (the rows that
-            together carry 90 % of it, largest share first, and their closures), ``m_eff``
-            (kg or kg m^2) and ``row_omega_n`` (rad/s) of that row alone, ``omega_n`` (rad/s),
-            ``zeta``, ``omega_h`` (``omega_n h``) and ``bound`` of the mode.
-        """
-        self._step_radius = None
-        if not isinstance(self.method, PenaltyClosure) or self.model.n_rows == 0:
-            return []
-        report, self._step_radius = self._closure_modes(self._initial_mobility())
-        return report
-
-    def _closure_modes(self, g: np.ndarray) -> tuple[list[dict], float | None]:
-        """Report entries of :meth:`_stiffness_report` for mobility ``g``, shape (r, r).
-
-        Returns
-        -------
-        report : list of dict
-        radius : float or None
-            Spectral radius of one step on the coupled closure dynamics, computed only when the
-            gains are not proportional (``Kv != c Kp``) and the method has a finite bound.
-        """
-        kp, kv = self.method.kp, self.method.kv
-        modes = penalty_modes(g, kp, kv)
-        meff = self._effective_masses(g)
-        names = [c.name for c in self.model.closures for _ in range(c.rows)]
-        fixed = self.integrator.fixed_step
-        if fixed and modes.omega_n.size:
-            bounds = self.integrator.stability_bounds(modes.zeta)
-        else:
-            bounds = np.full(modes.omega_n.size, np.inf)
-        radius = None
-        if (
-            fixed
-            and not modes.proportional
-            and modes.stiffness.size
-            and np.isfinite(self.integrator.stability_bound(0.0))
-        ):
-            # Modes of non-proportional gains are not independent oscillators: judge the
-            # method's own step on the coupled system as well.
-            step = self.integrator.step_matrix(modes.stiffness, modes.damping, self.h)
-            radius = float(np.max(np.abs(np.linalg.eigvals(step))))
-        report = []
-        for j, wn in enumerate(modes.omega_n):
-            share = modes.share[j]
-            order = [int(i) for i in np.argsort(-share, kind="stable")]
-            cover = int(np.searchsorted(np.cumsum(share[order]), 0.9 * float(share.sum()))) + 1
-            rows = order[: min(cover, len(order))]
-            top = rows[0]
-            m = float(meff[top])
-            report.append(
-                {
-                    "closure": names[top],
-                    "row": top,
-                    "closures": list(dict.fromkeys(names[i] for i in rows)),
-                    "rows": rows,
-                    "share": [float(share[i]) for i in rows],
-                    "m_eff": m,
-                    "row_omega_n": float(np.sqrt(kp[top] / m)) if m > 0 else float("nan"),
-                    "omega_n": float(wn),
-                    "zeta": float(modes.zeta[j]),
-                    "omega_h": float(wn) * self.h,
-                    "bound": float(bounds[j]),
-                }
-            )
-        return report, radius
-
-    def _check_stiffness(self) -> None:
-        """Raise :class:`StiffnessError` when a closure mode is beyond the method's bound."""
-        report = self.stiffness_report
-        over = [m for m in report if m["omega_h"] > (1.0 - STIFFNESS_MARGIN) * m["bound"]]
-        radius = self._step_radius
-        # A full 2r x 2r step map (non-proportional gains only): its eigenvalues near a double
-        # root carry ~sqrt(eps) error, so growth counts from 1e-6 per step.
-        if not over and (radius is None or radius <= 1.0 + 1e-6):
-            return
-        integ = self.settings.integrator
-        usable = [m for m in report if m["bound"] > 0 and np.isfinite(m["bound"])]
-        need = max(
-            (
-                int(np.ceil(m["omega_n"] * self.dt / ((1.0 - STIFFNESS_MARGIN) * m["bound"])))
-                for m in usable
-            ),
-            default=self.settings.substeps,
-        )
-        hint = (
-            f"use --substeps {need} or more" if need > self.settings.substeps else "use more substeps"
-        ) + ", the implicit_euler integrator, --closure exact, or lower gains"
-        if not over:
-            raise StiffnessError(
-                f"penalty closure modes of {', '.join(repr(c.name) for c in self.model.closures)}:"
-                f" one step of {integ} with h = {self.h:.3g} s amplifies the closure error by "
-                f"{radius:.4g} (spectral radius of the step on the linearized closure dynamics "
-                f"at the initial pose, above 1); {hint}"
-            )
-        worst = max(over, key=lambda m: m["omega_h"] / max(m["bound"], 1e-300))
-        if worst["share"][0] >= 0.99:
-            where = f"closure '{worst['closure']}' row {worst['row']}"
-            alone = ""
-        else:
-            names = worst["closures"]
-            listed = ", ".join(f"'{c}'" for c in names[:4]) + (
-                f" and {len(names) - 4} more" if len(names) > 4 else ""
-            )
-            rows = worst["rows"]
-            shown = ", ".join(str(i) for i in rows[:6]) + (", ..." if len(rows) > 6 else "")
-            where = (
-                f"closure{'s' if len(names) > 1 else ''} {listed} (coupled mode of "
-                f"{len(rows)} row{'s' if len(rows) > 1 else ''}: {shown})"
-            )
-            alone = (
-                f"; row {worst['row']} alone: omega_n = {worst['row_omega_n']:.4g} rad/s"
-                if np.isfinite(worst["row_omega_n"])
-                else ""
-            )
-        side = "beyond" if worst["omega_h"] > worst["bound"] else "on"
-        raise StiffnessError(
-            f"{where}: omega_n = {worst['omega_n']:.4g} rad/s (zeta = {worst['zeta']:.3g}"
-            f"{alone}, effective mass {worst['m_eff']:.4g}) gives omega_n*h = {worst['omega_h']:.3g} with "
-            f"h = {self.h:.3g} s, {side} the stability bound {worst['bound']:.3g} of {integ} (at "
-            f"the initial pose); {hint}"
-        )
+    def _closure_modes_at(self, q: np.ndarray, qd: np.ndarray) -> list[dict]:
+        """:func:`~vjm_ros.sim.stiffness.closure_modes` of the run's gains at a state."""
+        mobility = mobility_at(self.model, q, qd)
+        return closure_modes(self.model, self.method, self.integrator, self.h, mobility)[0]
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -526,7 +350,7 @@ class Simulator:
             # The closure modes stiffen as the pose changes: judge the last good poses too.
             worst, when = None, 0.0
             states = [(0.0, self.stiffness_report)] + [
-                (t, self._closure_modes(self._mobility_at(q, qd))[0])
+                (t, self._closure_modes_at(q, qd))
                 for t, q, qd in self._history
                 if t > 0 and np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
             ]
