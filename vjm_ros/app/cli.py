@@ -198,32 +198,27 @@ def _cmd_scenes() -> int:
 
 
 def _settings(args, scene):
-    from vjm_ros.sim.simulator import SimulationSettings
+    from vjm_ros.sim.settings import resolve_settings
 
-    d, g = scene.defaults, scene.gains
-    closure = args.closure or g.get("method", "penalty")
-    raw = args.kp is not None or args.kv is not None
-    modal = args.omega_n is not None or args.zeta is not None
-    if raw and modal:
-        raise ConfigurationError("give either --kp/--kv or --omega-n/--zeta, not both")
-    if args.kv is not None and args.kp is None:
-        raise ConfigurationError("--kv needs --kp")
-    return SimulationSettings(
-        integrator=args.integrator or d.get("integrator", "rk4"),
-        closure=closure,
-        rate=args.rate if args.rate is not None else d.get("rate", 1000.0),
-        substeps=args.substeps if args.substeps is not None else d.get("substeps", 1),
+    return resolve_settings(
+        scene.defaults,
+        scene.gains,
+        integrator=args.integrator,
+        closure=args.closure,
+        rate=args.rate,
+        substeps=args.substeps,
         kp=args.kp,
-        kv=args.kv if args.kv is not None else (0.0 if args.kp is not None else None),
+        kv=args.kv,
         omega_n=args.omega_n,
-        zeta=args.zeta if args.zeta is not None else (1.0 if args.omega_n is not None else None),
-        alpha=args.alpha if args.alpha is not None else g.get("alpha"),
-        beta=args.beta if args.beta is not None else g.get("beta"),
-        projection=bool(args.projection or g.get("projection", False)),
+        zeta=args.zeta,
+        alpha=args.alpha,
+        beta=args.beta,
+        projection=True if args.projection else None,
         rtol=args.rtol,
         atol=args.atol,
         kernel=args.kernel,
         check_stiffness=not args.no_stiffness_check,
+        flag=lambda key: "--" + key.replace("_", "-"),
     )
 
 

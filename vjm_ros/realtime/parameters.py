@@ -21,7 +21,8 @@ from dataclasses import asdict, dataclass, fields, replace
 from vjm_ros.core.errors import ConfigurationError, StiffnessError
 from vjm_ros.core.integrators import INTEGRATORS
 from vjm_ros.scene.loader import Scene, load_scene
-from vjm_ros.sim.simulator import SimulationSettings, Simulator
+from vjm_ros.sim.settings import SimulationSettings, resolve_settings
+from vjm_ros.sim.simulator import Simulator
 
 NOW, RESET, START = "now", "reset", "start"
 
@@ -214,21 +215,19 @@ def _check(spec: ParamSpec, value: object) -> bool | int | float | str:
 def simulation_settings(config: NodeConfig, scene: Scene) -> SimulationSettings:
     """Settings of the simulator: the node's values, else the scene's defaults.
 
-    Resolution matches ``vjm run``: a given ``kp`` without ``kv`` means ``kv = 0``; Baumgarte gains
-    and projection come from the scene.
+    Resolved by :func:`~vjm_ros.sim.settings.resolve_settings`, as ``vjm run`` does: a given
+    ``kp`` without ``kv`` means ``kv = 0``; Baumgarte gains and projection come from the scene.
     """
-    d, g = scene.defaults, scene.gains
     given_kp = config.kp >= 0
-    return SimulationSettings(
-        integrator=config.integrator or d.get("integrator", "rk4"),
-        closure=config.closure or g.get("method", "penalty"),
-        rate=config.rate_hz or float(d.get("rate", 1000.0)),
-        substeps=config.substeps or int(d.get("substeps", 1)),
+    return resolve_settings(
+        scene.defaults,
+        scene.gains,
+        integrator=config.integrator or None,
+        closure=config.closure or None,
+        rate=config.rate_hz or None,
+        substeps=config.substeps or None,
         kp=config.kp if given_kp else None,
-        kv=(config.kv if config.kv >= 0 else 0.0) if given_kp else None,
-        alpha=g.get("alpha"),
-        beta=g.get("beta"),
-        projection=bool(g.get("projection", False)),
+        kv=config.kv if given_kp and config.kv >= 0 else None,
         kernel=config.kernel,
     )
 

@@ -7,8 +7,7 @@ A control tick of length ``dt = 1 / rate`` holds the efforts constant and advanc
 from __future__ import annotations
 
 import collections
-import importlib.util
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,94 +17,13 @@ from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integ
 from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
+from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
     check_stiffness,
     closure_method,
     closure_modes,
     mobility_at,
 )
-
-
-@dataclass(frozen=True)
-class SimulationSettings:
-    """How to integrate a scene.
-
-    Attributes
-    ----------
-    integrator : str
-        Registry name (see :data:`vjm_ros.core.integrators.INTEGRATORS`).
-    closure : str
-        ``"penalty"`` or ``"exact"``.
-    rate : float
-        Control ticks per second, Hz.
-    substeps : int
-        Fixed steps per tick.
-    kp, kv : float or None
-        Raw penalty gains (N/m, N s/m; N m/rad for angle rows). Used when given.
-    omega_n, zeta : float or None
-        Penalty gains as natural frequency (rad/s) and damping ratio per row, through the
-        effective mass at the initial pose. Used when ``kp`` is not given.
-    alpha, beta : float
-        Baumgarte gains of the exact closure, 1/s.
-    projection : bool
-        Exact closure only: project ``q``, ``qd`` onto the closure manifold after each tick.
-    rtol, atol : float
-        Tolerances of adaptive integrators.
-    kernel : str
-        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
-        error without numba) or ``"numpy"`` (the reference implementation).
-    check_stiffness : bool
-        Refuse penalty gains beyond the integrator's stability bound before running (judged on
-        the coupled closure modes at the initial pose, see :attr:`Simulator.stiffness_report`).
-    divergence_limit : float or None
-        Largest closure residual (m or rad) before the run is stopped; None disables the check.
-    """
-
-    integrator: str = "rk4"
-    closure: str = "penalty"
-    rate: float = 1000.0
-    substeps: int = 1
-    kp: float | None = None
-    kv: float | None = None
-    omega_n: float | None = None
-    zeta: float | None = None
-    alpha: float | None = None
-    beta: float | None = None
-    projection: bool = False
-    rtol: float = 1e-9
-    atol: float = 1e-12
-    kernel: str = "auto"
-    check_stiffness: bool = True
-    divergence_limit: float | None = None
-
-    def validated(self) -> SimulationSettings:
-        """Check value ranges; raise :class:`ConfigurationError` naming the setting."""
-        if self.closure not in ("penalty", "exact"):
-            raise ConfigurationError(
-                f"closure: expected 'penalty' or 'exact', found {self.closure!r}"
-            )
-        if not (np.isfinite(self.rate) and self.rate > 0):
-            raise ConfigurationError(f"rate: expected a positive number of Hz, found {self.rate!r}")
-        if int(self.substeps) != self.substeps or self.substeps < 1:
-            raise ConfigurationError(
-                f"substeps: expected a whole number >= 1, found {self.substeps!r}"
-            )
-        for key in ("kp", "kv", "omega_n", "zeta"):
-            v = getattr(self, key)
-            if v is not None and not (np.isfinite(v) and v >= 0):
-                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
-        for key in ("alpha", "beta", "rtol", "atol"):
-            v = getattr(self, key)
-            if v is not None and not (np.isfinite(v) and v >= 0):
-                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
-        if self.kernel not in ("auto", "numba", "numpy"):
-            raise ConfigurationError(
-                f"kernel: expected 'auto', 'numba' or 'numpy', found {self.kernel!r}"
-            )
-        if self.kernel == "numba" and importlib.util.find_spec("numba") is None:
-            raise ConfigurationError("kernel: 'numba' needs the numba package")
-        make_integrator(self.integrator)  # raises with the list of known names
-        return self
 
 
 @dataclass
@@ -472,8 +390,3 @@ class Simulator:
             out["rtol"] = s.rtol
             out["atol"] = s.atol
         return out
-
-
-def with_overrides(settings: SimulationSettings, **changes) -> SimulationSettings:
-    """A copy of ``settings`` with the non-None ``changes`` applied."""
-    return replace(settings, **{k: v for k, v in changes.items() if v is not None})

@@ -1,0 +1,172 @@
+"""Run settings: what they are, and the one place where they are resolved.
+
+:func:`resolve_settings` is how ``vjm run``, the node and the studies turn what a user gave (flags,
+ROS parameters, sweep axes) plus the scene's defaults into :class:`SimulationSettings`, with the
+same rules everywhere: a given value wins over the scene's, a stiffness given without damping
+means no damping, a natural frequency without a damping ratio means critical damping, and raw
+and modal gains cannot be mixed.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.core.integrators import make_integrator
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """How to integrate a scene.
+
+    Attributes
+    ----------
+    integrator : str
+        Registry name (see :data:`vjm_ros.core.integrators.INTEGRATORS`).
+    closure : str
+        ``"penalty"`` or ``"exact"``.
+    rate : float
+        Control ticks per second, Hz.
+    substeps : int
+        Fixed steps per tick.
+    kp, kv : float or None
+        Raw penalty gains (N/m, N s/m; N m/rad for angle rows). Used when given.
+    omega_n, zeta : float or None
+        Penalty gains as natural frequency (rad/s) and damping ratio per row, through the
+        effective mass at the initial pose. Used when ``kp`` is not given.
+    alpha, beta : float
+        Baumgarte gains of the exact closure, 1/s.
+    projection : bool
+        Exact closure only: project ``q``, ``qd`` onto the closure manifold after each tick.
+    rtol, atol : float
+        Tolerances of adaptive integrators.
+    kernel : str
+        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
+        error without numba) or ``"numpy"`` (the reference implementation).
+    check_stiffness : bool
+        Refuse penalty gains beyond the integrator's stability bound before running (judged on
+        the coupled closure modes at the initial pose, see :attr:`Simulator.stiffness_report`).
+    divergence_limit : float or None
+        Largest closure residual (m or rad) before the run is stopped; None disables the check.
+    """
+
+    integrator: str = "rk4"
+    closure: str = "penalty"
+    rate: float = 1000.0
+    substeps: int = 1
+    kp: float | None = None
+    kv: float | None = None
+    omega_n: float | None = None
+    zeta: float | None = None
+    alpha: float | None = None
+    beta: float | None = None
+    projection: bool = False
+    rtol: float = 1e-9
+    atol: float = 1e-12
+    kernel: str = "auto"
+    check_stiffness: bool = True
+    divergence_limit: float | None = None
+
+    def validated(self) -> SimulationSettings:
+        """Check value ranges; raise :class:`ConfigurationError` naming the setting."""
+        if self.closure not in ("penalty", "exact"):
+            raise ConfigurationError(
+                f"closure: expected 'penalty' or 'exact', found {self.closure!r}"
+            )
+        if not (np.isfinite(self.rate) and self.rate > 0):
+            raise ConfigurationError(f"rate: expected a positive number of Hz, found {self.rate!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ConfigurationError(
+                f"substeps: expected a whole number >= 1, found {self.substeps!r}"
+            )
+        for key in ("kp", "kv", "omega_n", "zeta"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        for key in ("alpha", "beta", "rtol", "atol"):
+            v = getattr(self, key)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
+        if self.kernel not in ("auto", "numba", "numpy"):
+            raise ConfigurationError(
+                f"kernel: expected 'auto', 'numba' or 'numpy', found {self.kernel!r}"
+            )
+        if self.kernel == "numba" and importlib.util.find_spec("numba") is None:
+            raise ConfigurationError("kernel: 'numba' needs the numba package")
+        make_integrator(self.integrator)  # raises with the list of known names
+        return self
+
+
+def resolve_settings(
+    defaults: dict,
+    gains: dict,
+    *,
+    integrator: str | None = None,
+    closure: str | None = None,
+    rate: float | None = None,
+    substeps: int | None = None,
+    kp: float | None = None,
+    kv: float | None = None,
+    omega_n: float | None = None,
+    zeta: float | None = None,
+    alpha: float | None = None,
+    beta: float | None = None,
+    projection: bool | None = None,
+    rtol: float | None = None,
+    atol: float | None = None,
+    kernel: str = "auto",
+    check_stiffness: bool = True,
+    flag: Callable[[str], str] = str,
+) -> SimulationSettings:
+    """Settings from the values a user gave (None: not given) and the scene's defaults.
+
+    Parameters
+    ----------
+    defaults, gains : dict
+        The scene's run defaults (``integrator``, ``rate``, ``substeps``) and closure method and
+        gains (``method``, ``alpha``, ``beta``, ``projection``; the penalty gains of the scene
+        are applied by the simulator when none are given here).
+    integrator, closure, rate, substeps, kp, kv, omega_n, zeta, alpha, beta, projection, rtol, \
+atol, kernel, check_stiffness
+        As in :class:`SimulationSettings`; rate in Hz, gains in N/m, N s/m, rad/s, 1/s.
+    flag : callable
+        How a setting is named in error messages (``--omega-n`` for the command line).
+
+    Returns
+    -------
+    SimulationSettings
+
+    Raises
+    ------
+    ConfigurationError
+        Raw and modal gains together, or a damping without a stiffness.
+    """
+    if (kp is not None or kv is not None) and (omega_n is not None or zeta is not None):
+        raise ConfigurationError(
+            f"give either {flag('kp')}/{flag('kv')} or {flag('omega_n')}/{flag('zeta')}, not both"
+        )
+    if kv is not None and kp is None:
+        raise ConfigurationError(f"{flag('kv')} needs {flag('kp')}")
+    if zeta is not None and omega_n is None:
+        raise ConfigurationError(f"{flag('zeta')} needs {flag('omega_n')}")
+    given = {"rtol": rtol, "atol": atol}  # None: the dataclass defaults
+    return SimulationSettings(
+        integrator=integrator or defaults.get("integrator", "rk4"),
+        closure=closure or gains.get("method", "penalty"),
+        rate=float(rate if rate is not None else defaults.get("rate", 1000.0)),
+        substeps=int(substeps if substeps is not None else defaults.get("substeps", 1)),
+        kp=kp,
+        kv=kv if kv is not None else (0.0 if kp is not None else None),
+        omega_n=omega_n,
+        zeta=zeta if zeta is not None else (1.0 if omega_n is not None else None),
+        alpha=alpha if alpha is not None else gains.get("alpha"),
+        beta=beta if beta is not None else gains.get("beta"),
+        projection=bool(projection if projection is not None else gains.get("projection", False)),
+        kernel=kernel,
+        check_stiffness=check_stiffness,
+        **{k: v for k, v in given.items() if v is not None},
+    )
