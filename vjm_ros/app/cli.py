@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import time
 from pathlib import Path
@@ -21,23 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from vjm_ros.core.errors import ConfigurationError, DivergenceError, SceneError, VjmError
+from vjm_ros.logs.signals import StopSignals
 from vjm_ros.logs.storage import LogWriters
 
 DEFAULT_SCENE = "four_bar"
 EXIT_BAD_INPUT = 2
 EXIT_DIVERGED = 3
 EXIT_LOG_FAILED = 4
-
-
-class _StopRequest:
-    """SIGINT/SIGTERM during a run: the handler only records the signal, and the run loop stops
-    between two ticks, so that no log is interrupted in the middle of a write."""
-
-    def __init__(self) -> None:
-        self.code = 0
-
-    def __call__(self, signum, _frame) -> None:
-        self.code = 128 + signum
 
 
 class Progress:
@@ -247,31 +236,28 @@ def _cmd_run(args) -> int:
     traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2)
     ticks = int(round(duration * settings.rate))
     progress = Progress(duration, sys.stderr.isatty() and sys.stdout.isatty())
-    stop = _StopRequest()
     # Installed before any log is opened: from here on a signal ends the run between two ticks
     # and every log is finalized.
-    old = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
     code, error = 0, None
     logs = None
     wall0 = time.perf_counter()
-    try:
-        logs = LogWriters(_open_recorders(args, scene, sim, duration), _report_log_failure)
-        _record(traj, logs, sim.sample())
-        for _ in range(ticks):
-            if stop.code:
-                break
-            sim.advance()
+    with StopSignals() as stop:
+        try:
+            logs = LogWriters(_open_recorders(args, scene, sim, duration), _report_log_failure)
             _record(traj, logs, sim.sample())
-            progress.update(sim.t)
-    except DivergenceError as exc:
-        code, error = EXIT_DIVERGED, str(exc)
-    finally:
-        wall = time.perf_counter() - wall0
-        progress.close()
-        if logs is not None:
-            logs.close()
-        for s, h in old.items():
-            signal.signal(s, h)
+            for _ in range(ticks):
+                if stop.requested:
+                    break
+                sim.advance()
+                _record(traj, logs, sim.sample())
+                progress.update(sim.t)
+        except DivergenceError as exc:
+            code, error = EXIT_DIVERGED, str(exc)
+        finally:
+            wall = time.perf_counter() - wall0
+            progress.close()
+            if logs is not None:
+                logs.close()
     if stop.code and not code:
         code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     if logs is not None and logs.failed and not code:

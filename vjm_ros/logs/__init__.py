@@ -19,18 +19,23 @@ The heavy dependencies (``mcap``, ``rerun``) are imported only when a recorder c
 
 from __future__ import annotations
 
-import functools
-import signal
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
+
+from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
 
 if TYPE_CHECKING:
     from vjm_ros.logs.mcap_recorder import McapRecorder
     from vjm_ros.logs.rerun_recorder import RerunRecorder
 
-__all__ = ["McapRecorder", "RerunRecorder", "Timebase", "finalize_on_signals", "package_versions"]
+__all__ = [
+    "McapRecorder",
+    "RerunRecorder",
+    "StopSignals",
+    "Timebase",
+    "atomic",
+    "finalize_on_signals",
+    "package_versions",
+]
 
 
 def __getattr__(name: str) -> Any:
@@ -43,86 +48,6 @@ def __getattr__(name: str) -> Any:
 
         return RerunRecorder
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-DEFAULT_SIGNALS: tuple[int, ...] = tuple(
-    s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s is not None
-)
-
-
-class _SignalDeferral:
-    """A termination signal that arrives while a recorder writes, in the main thread, is acted on
-    when the write returns: a log is never left with half a message (its statistics counting a
-    message its chunk does not hold)."""
-
-    def __init__(self) -> None:
-        self.depth = 0
-        self.pending: int | None = None
-        self.main = threading.main_thread().ident
-
-
-_DEFERRAL = _SignalDeferral()
-
-
-def atomic(method: Callable) -> Callable:
-    """Decorate a recorder method that writes: :func:`finalize_on_signals` waits for it."""
-
-    @functools.wraps(method)
-    def wrapper(self, *args, **kwargs):
-        if threading.get_ident() != _DEFERRAL.main:
-            return method(self, *args, **kwargs)
-        _DEFERRAL.depth += 1
-        try:
-            return method(self, *args, **kwargs)
-        finally:
-            _DEFERRAL.depth -= 1
-            if _DEFERRAL.depth == 0 and _DEFERRAL.pending is not None:
-                code, _DEFERRAL.pending = _DEFERRAL.pending, None
-                raise SystemExit(code)
-
-    return wrapper
-
-
-@contextmanager
-def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[None]:
-    """Turn termination signals into :class:`SystemExit` while the block runs.
-
-    A process stopped with SIGTERM (``kill``, ``timeout``, a launch system) then unwinds normally,
-    so the ``close()`` of every recorder opened in or around the block runs and the logs are
-    finalized. A signal that arrives while a recorder writes takes effect when the write returns
-    (:func:`atomic`). The exit status is ``128 + signal number``, as for a default kill. Further signals
-    of the set are ignored while unwinding, so a second SIGTERM cannot cut finalization short
-    (SIGKILL still can). The previous handlers come back when the block ends. SIGINT is left
-    alone: Python already raises :class:`KeyboardInterrupt` for it.
-
-    Outside the main thread, where Python cannot install signal handlers, this does nothing.
-
-    Parameters
-    ----------
-    signals : tuple of int
-        Signals to convert; SIGTERM and SIGHUP by default.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def _ignore(signum: int, frame: object) -> None:
-        return None
-
-    def _exit(signum: int, frame: object) -> None:
-        for s in signals:
-            signal.signal(s, _ignore)
-        if _DEFERRAL.depth:  # inside a recorder's write: exit when it returns
-            _DEFERRAL.pending = 128 + signum
-            return
-        raise SystemExit(128 + signum)
-
-    previous = {s: signal.signal(s, _exit) for s in signals}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
 
 
 class Recorder:

@@ -10,13 +10,13 @@
 from __future__ import annotations
 
 import os
-import signal
 import threading
 import traceback
 from typing import TYPE_CHECKING
 
 from rclpy.executors import ExternalShutdownException
 
+from vjm_ros.logs.signals import StopSignals
 from vjm_ros.realtime.gate import Gate
 
 if TYPE_CHECKING:
@@ -68,30 +68,18 @@ class Spinner:
                 traceback.print_exc()
 
 
-class StopOnSignals:
-    """Context manager: SIGINT and SIGTERM ask the tick loop to stop (exit code 0).
+class StopOnSignals(StopSignals):
+    """Context manager: SIGINT and SIGTERM ask the tick loop to stop (the node then exits 0).
 
     A signal that arrives before the loop exists (while the scene loads) stops the loop as soon
-    as it is attached. Outside the main thread nothing is installed.
+    as it is attached. The handling itself is :class:`~vjm_ros.logs.signals.StopSignals`'s.
     """
 
     def __init__(self) -> None:
-        self.requested = False
+        super().__init__(on_stop=self._stop_loop)
         self.loop: TickLoop | None = None
-        self._previous: dict = {}
 
-    def __enter__(self) -> StopOnSignals:
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._previous[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-
-    def _handle(self, signum, frame) -> None:
-        self.requested = True
+    def _stop_loop(self, signum: int) -> None:
         if self.loop is not None:
             self.loop.stop()
 
