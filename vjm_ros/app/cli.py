@@ -296,26 +296,18 @@ def _prepare_dir(path: Path) -> None:
 
 
 def _open_recorders(args, scene, sim, duration: float) -> list:
-    from vjm_ros.logs.storage import check_log_path, is_file_target
+    from vjm_ros.logs.opening import open_recorders
 
-    for key, target in (("--mcap", args.mcap), ("--rrd", args.rrd)):
-        if target is not None and is_file_target(target):
-            check_log_path(target, key, duration, sim.settings.rate)
-    recorders = []
-    try:
-        if args.mcap is not None:
-            from vjm_ros.logs.mcap_recorder import McapRecorder
-
-            recorders.append(McapRecorder(args.mcap, scene.model, sim.describe(), scene.text))
-        if args.rrd is not None:
-            from vjm_ros.logs.rerun_recorder import RerunRecorder
-
-            recorders.append(RerunRecorder(args.rrd, scene.model, sim.describe()))
-    except (OSError, RuntimeError, ValueError) as exc:
-        for rec in recorders:
-            rec.close()
-        raise ConfigurationError(f"cannot open log file: {exc}") from None
-    return recorders
+    return open_recorders(
+        scene.model,
+        sim.describe(),
+        scene.text,
+        mcap=args.mcap,
+        rrd=args.rrd,
+        duration=duration,
+        rate=sim.settings.rate,
+        keys=("--mcap", "--rrd"),
+    )
 
 
 def _record(traj, logs, sample) -> None:

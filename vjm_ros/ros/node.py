@@ -75,7 +75,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from vjm_ros.core.errors import ConfigurationError, DivergenceError, VjmError
-from vjm_ros.logs.storage import check_log_path, is_file_target
+from vjm_ros.logs.opening import open_recorders as open_log_recorders
 from vjm_ros.realtime.commands import CommandBuffer, Throttle, Verdict
 from vjm_ros.realtime.loop import LoopOptions, TickLoop
 from vjm_ros.realtime.monitor import ERROR, assess
@@ -143,7 +143,8 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: str) -> list:
-    """The MCAP and rerun recorders asked for by ``mcap`` and ``rrd``.
+    """The MCAP and rerun recorders asked for by ``mcap`` and ``rrd``
+    (:func:`~vjm_ros.logs.opening.open_recorders`, with the node's settings in the logs).
 
     Raises
     ------
@@ -152,30 +153,8 @@ def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: 
     """
     settings = {**sim.describe(), "node": node_name, "realtime": config.realtime,
                 "lockstep": config.lockstep}
-    wanted = [("mcap", config.mcap, "McapRecorder"), ("rrd", config.rrd, "RerunRecorder")]
-    recorders: list = []
-    try:
-        for key, path, cls_name in wanted:
-            if not path:
-                continue
-            try:
-                from vjm_ros import logs as module
-
-                cls = getattr(module, cls_name)
-            except (ImportError, AttributeError) as exc:
-                raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
-            if is_file_target(path):
-                check_log_path(path, key, config.duration, sim.settings.rate)
-            try:
-                args = (path, scene.model, settings, scene.text) if key == "mcap" else (path, scene.model, settings)
-                recorders.append(cls(*args))
-            except OSError as exc:
-                raise ConfigurationError(f"{key}: cannot open {path!r} ({exc.strerror or exc})") from None
-    except ConfigurationError:
-        for rec in recorders:
-            rec.close()
-        raise
-    return recorders
+    return open_log_recorders(scene.model, settings, scene.text, mcap=config.mcap,
+                              rrd=config.rrd, duration=config.duration, rate=sim.settings.rate)
 
 
 class SimNode(Node):

@@ -1,0 +1,77 @@
+"""Opening the logs of a run, the same way for ``vjm run`` and the node."""
+
+from __future__ import annotations
+
+from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.core.model import Model
+from vjm_ros.logs.storage import check_log_path, is_file_target
+
+
+def open_recorders(
+    model: Model,
+    settings: dict,
+    scene_text: str,
+    *,
+    mcap: str | None = None,
+    rrd: str | None = None,
+    duration: float = 0.0,
+    rate: float = 1000.0,
+    keys: tuple[str, str] = ("mcap", "rrd"),
+) -> list:
+    """The MCAP and rerun recorders asked for, after the storage checks.
+
+    Parameters
+    ----------
+    model : Model
+    settings : dict
+        Run settings written into the logs (``Simulator.describe()`` plus what the caller adds).
+    scene_text : str
+        The scene YAML, attached to the MCAP log.
+    mcap, rrd : str, optional
+        Log paths (or ``rerun`` targets such as ``rerun+http://...`` for ``rrd``); None or ""
+        for no log.
+    duration : float
+        Simulated seconds the run will last (0: unknown), for the free-space check, s.
+    rate : float
+        Control ticks per second, Hz.
+    keys : tuple of str
+        How the two logs are named in error messages (``("--mcap", "--rrd")`` on the command line).
+
+    Returns
+    -------
+    list
+        The open recorders (MCAP first); none is left open when this raises.
+
+    Raises
+    ------
+    ConfigurationError
+        A recorder is not available, a path fails the checks of
+        :func:`~vjm_ros.logs.storage.check_log_path`, or a file cannot be opened.
+    """
+    wanted = [(keys[0], mcap, "McapRecorder"), (keys[1], rrd, "RerunRecorder")]
+    for key, path, _ in wanted:
+        if path and is_file_target(path):
+            check_log_path(path, key, duration, rate)
+    recorders: list = []
+    try:
+        for key, path, cls_name in wanted:
+            if not path:
+                continue
+            try:
+                from vjm_ros import logs
+
+                cls = getattr(logs, cls_name)
+            except (ImportError, AttributeError) as exc:
+                raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
+            args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
+                path, model, settings)
+            try:
+                recorders.append(cls(*args))
+            except (OSError, RuntimeError, ValueError) as exc:
+                reason = getattr(exc, "strerror", None) or exc
+                raise ConfigurationError(f"{key}: cannot open {path!r} ({reason})") from None
+    except ConfigurationError:
+        for rec in recorders:
+            rec.close()
+        raise
+    return recorders
