@@ -1,0 +1,229 @@
+"""The scaling study: generated chain and star scenes, cost per tick against their size."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections.abc import Sequence
+from dataclasses import fields
+
+import numpy as np
+
+from vjm_ros.core.errors import (
+    VjmError,
+)
+from vjm_ros.scene.loader import Scene, parse_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
+from vjm_ros.studies.bench.grid import (
+    Grid,
+)
+from vjm_ros.studies.bench.progress import (
+    BenchProgress,
+)
+
+
+def chain_scene(n_links: int, gains: str = "closure_method: {method: penalty, omega_n: 100.0, zeta: 1.0}") -> Scene:
+    """One chain of ``n_links`` revolute links (1 m, 1 kg in all) whose tip runs on a horizontal line.
+
+    The links hang in a zigzag (absolute angles alternating -60 and -120 degrees); the line passes
+    through the initial tip, so the scene closes exactly at t = 0 (one slider row).
+
+    Parameters
+    ----------
+    n_links : int
+        1 or more.
+    gains : str
+        The scene's ``closure_method`` line.
+
+    Returns
+    -------
+    Scene
+    """
+    if n_links < 1:
+        raise ValueError("n_links: expected 1 or more")
+    length, mass = 1.0 / n_links, 1.0 / n_links
+    inertia = mass * length**2 / 12.0
+    links, x, y = [], 0.0, 0.0
+    for k in range(n_links):
+        ang = -math.pi / 3 if k % 2 == 0 else -2 * math.pi / 3
+        x += length * math.cos(ang)
+        y += length * math.sin(ang)
+        links.append(
+            f"      - {{name: l{k}, length: {length!r}, mass: {mass!r}, inertia: {inertia!r}, "
+            f"com: [{length / 2!r}, 0.0], joint: {{name: j{k}, type: revolute, angle: {ang!r}}}}}"
+        )
+    text = "\n".join([
+        f"name: chain_{n_links}",
+        "description: generated chain for the cost-per-tick study",
+        "chains:",
+        "  - name: chain",
+        "    links:",
+        *links,
+        "closures:",
+        f"  - {{name: tip_line, type: slider, point: {{link: l{n_links - 1}, at: tip}}, "
+        f"line: {{ground: [{x!r}, {y!r}], direction: [1.0, 0.0]}}}}",
+        gains,
+    ])
+    return parse_scene(text, source=f"<chain_scene {n_links}>")
+
+
+def star_scene(n_chains: int, gains: str = "closure_method: {method: penalty, omega_n: 100.0, zeta: 1.0}") -> Scene:
+    """``n_chains`` two-link chains from a unit circle whose tips meet at its centre.
+
+    The first chain's tip is pinned to every other chain's tip (``n_chains - 1`` hinges, two rows
+    each); the mechanism keeps two degrees of freedom. Links 0.6 m, 0.5 kg, ``I = m a^2 / 12``.
+
+    Parameters
+    ----------
+    n_chains : int
+        1 or more.
+    gains : str
+        The scene's ``closure_method`` line.
+
+    Returns
+    -------
+    Scene
+    """
+    if n_chains < 1:
+        raise ValueError("n_chains: expected 1 or more")
+    a, m = 0.6, 0.5
+    inertia = m * a * a / 12.0
+    h = math.sqrt(a * a - 0.25)
+    chains = []
+    for c in range(n_chains):
+        alpha = 2 * math.pi * c / n_chains + 0.1
+        bx, by = math.cos(alpha), math.sin(alpha)
+        ex, ey = 0.5 * bx - h * by, 0.5 * by + h * bx  # elbow: midpoint plus h along n(alpha)
+        th2 = math.atan2(ey - by, ex - bx)
+        th3 = math.atan2(-ey, -ex)
+        chains += [
+            f"  - name: c{c}",
+            f"    origin: [{bx!r}, {by!r}]",
+            "    links:",
+            f"      - {{name: c{c}_p, length: {a!r}, mass: {m!r}, inertia: {inertia!r}, "
+            f"com: [{a / 2!r}, 0.0], joint: {{name: c{c}_base, type: revolute, angle: {th2!r}}}}}",
+            f"      - {{name: c{c}_d, length: {a!r}, mass: {m!r}, inertia: {inertia!r}, "
+            f"com: [{a / 2!r}, 0.0], joint: {{name: c{c}_elbow, type: revolute, angle: {th3!r}}}}}",
+        ]
+    closures = [
+        f"  - {{name: pin{c}, type: hinge, point: {{link: c0_d, at: tip}}, target: {{link: c{c}_d, at: tip}}}}"
+        for c in range(1, n_chains)
+    ]
+    text = "\n".join([
+        f"name: star_{n_chains}",
+        "description: generated chains meeting at one pin, for the cost-per-tick study",
+        "chains:",
+        *chains,
+        "closures:" + ("" if closures else " []"),
+        *closures,
+        gains,
+        "assemble: {fixed: [c0_base]}",
+    ])
+    return parse_scene(text, source=f"<star_scene {n_chains}>")
+
+
+SCALING_METHODS = (
+    ("semi_implicit_euler", {"closure": "penalty", "omega_n": 100.0, "zeta": 1.0}),
+    ("implicit_euler", {"closure": "penalty", "kp": 1e5, "kv": 100.0}),
+    ("rk4", {"closure": "exact"}),
+)
+"""Settings timed in the cost-per-tick study (1 kHz, one step per tick)."""
+
+
+def tick_cost(scene: Scene, integrator: str, settings: dict, ticks: int, repeats: int) -> float:
+    """Median wall time of one 1 kHz tick, s.
+
+    Parameters
+    ----------
+    scene : Scene
+    integrator : str
+    settings : dict
+        More :class:`SimulationSettings` fields.
+    ticks : int
+        Ticks per timed repeat.
+    repeats : int
+
+    Returns
+    -------
+    float
+    """
+    samples = []
+    for _ in range(max(repeats, 1)):
+        sim = Simulator(scene.model, SimulationSettings(integrator=integrator, rate=1000.0,
+                                                        **settings), scene.gains)
+        sim.advance()  # warm-up
+        t0 = time.perf_counter()
+        for _ in range(ticks):
+            sim.advance()
+        samples.append((time.perf_counter() - t0) / ticks)
+    return float(statistics.median(samples))
+
+
+def _slope(ns: Sequence[float], costs: Sequence[float]) -> float | None:
+    pairs = [(math.log(n), math.log(c)) for n, c in zip(ns, costs, strict=True) if n >= 4 and c and c > 0]
+    if len(pairs) < 2:
+        return None
+    x = np.array([p[0] for p in pairs])
+    y = np.array([p[1] for p in pairs])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def _scaling_methods(extra: dict) -> list[tuple[str, str, dict]]:
+    """(key, integrator, settings) of the scaling study; the numpy kernel too, when selectable."""
+    out = []
+    kernels = [None]
+    if "kernel" in {f.name for f in fields(SimulationSettings)} and "kernel" not in extra:
+        kernels.append("numpy")
+    for kernel in kernels:
+        for integ, settings in SCALING_METHODS:
+            key = f"{integ} {settings['closure']}" + (f" [{kernel} kernel]" if kernel else "")
+            st = {**settings, **extra, **({"kernel": kernel} if kernel else {})}
+            out.append((key, integ, st))
+    return out
+
+
+def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
+                extra: dict | None = None) -> dict:
+    """Cost per tick against chain length and number of chains.
+
+    Each method of :data:`SCALING_METHODS` is timed with the default physics kernel and, when
+    :class:`SimulationSettings` has a ``kernel`` field, also with the numpy reference kernel.
+
+    Returns
+    -------
+    dict
+        ``methods`` (column keys), ``links`` and ``chains`` tables (size, closure rows, seconds
+        per tick per method) and the fitted growth exponent of each method for sizes >= 4.
+    """
+    methods = _scaling_methods(dict(extra or {}))
+    out: dict = {"methods": [m[0] for m in methods]}
+    for family, sizes, build in (("links", grid.scaling_links, chain_scene),
+                                 ("chains", grid.scaling_chains, star_scene)):
+        table = []
+        for size in sizes:
+            scene = build(size)
+            row = {"size": size, "n": scene.model.n, "rows": scene.model.n_rows}
+            for key, integ, settings in methods:
+                try:
+                    row[key] = tick_cost(scene, integ, settings, grid.scaling_ticks, repeats)
+                except (VjmError, np.linalg.LinAlgError) as exc:
+                    row[key] = None
+                    row.setdefault("errors", {})[key] = str(exc)
+                if progress:
+                    progress.advance(_scaling_work(scene, integ, grid, repeats) / len(methods) * 3,
+                                     f"scaling {family} {size}")
+            table.append(row)
+        growth = {key: _slope([r["n"] for r in table], [r.get(key) for r in table])
+                  for key, _, _ in methods}
+        out[family] = {"table": table, "growth_exponent": growth}
+    return out
+
+
+def _scaling_keys(scaling: dict) -> list[str]:
+    return scaling.get("methods") or [f"{i} {s['closure']}" for i, s in SCALING_METHODS]
+
+
+def _scaling_work(scene: Scene, integ: str, grid: Grid, repeats: int) -> float:
+    stages = 4.0 if integ == "rk4" else 1.0
+    return stages * (grid.scaling_ticks + 1) * max(repeats, 1) * (1 + scene.model.n / 8)
