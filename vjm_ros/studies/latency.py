@@ -1,4 +1,4 @@
-"""Timing of ``vjm_sim_node`` on this machine; re-run with ``python -m vjm_ros.ros.latency``.
+"""Timing of ``vjm_sim_node`` on this machine; re-run with ``python -m vjm_ros.studies.latency``.
 
 For each scene, with the node as a separate process (as users run it):
 
@@ -12,7 +12,7 @@ For each scene, with the node as a separate process (as users run it):
 Prints one line per scene, and with ``--json`` one JSON object on the last line. Numbers depend on
 what else runs on the machine: the 1-minute load average is printed with them.
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.ros.latency [--scenes four_bar five_bar]
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.latency [--scenes four_bar five_bar]
 """
 
 from __future__ import annotations
@@ -28,15 +28,8 @@ import threading
 import time
 
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
-from vjm_ros.ros.node import NODE_NAME
-from vjm_ros.ros.runtime import Spinner
+from vjm_ros.ros.probes import GraphProbe
 from vjm_ros.scene.loader import builtin_scenes, load_scene
 
 
@@ -82,25 +75,16 @@ class Probe:
     """
 
     def __init__(self, joint: str, count: int, magnitude: float):
-        self.ctx = rclpy.Context()
-        rclpy.init(context=self.ctx, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("vjm_latency_probe", context=self.ctx)
         self.joint, self.count, self.magnitude = joint, count, magnitude
         self.pending: dict[float, float] = {}
         self.latencies: list[float] = []
         self.states = 0
         self.lock = threading.Lock()
-        self.pub = self.node.create_publisher(
-            Float64MultiArray, f"/{NODE_NAME}/effort_commands", 10)
-        self.node.create_subscription(
-            JointState, "/joint_states", self._on_state,
-            QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
-        self.spinner = Spinner(self.executor).start()
         self.index = None
+        self.graph = GraphProbe("vjm_latency_probe", on_state=self._on_state, depth=100,
+                                commands=True)
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_state(self, msg) -> None:
         now = time.monotonic()
         if self.index is None:
             self.index = list(msg.name).index(self.joint)
@@ -114,7 +98,7 @@ class Probe:
     def drive(self, proc: subprocess.Popen, seconds: float) -> None:
         """Send commands for ``seconds`` once the node publishes, until it ends."""
         start = time.monotonic()
-        while self.states == 0 or self.pub.get_subscription_count() == 0:
+        while self.states == 0 or not self.graph.commands_matched():
             if proc.poll() is not None or time.monotonic() - start > 60.0:
                 return
             time.sleep(0.01)
@@ -126,15 +110,12 @@ class Probe:
             data = [value] + [0.0] * (self.count - 1)
             with self.lock:
                 self.pending[value] = time.monotonic()
-            self.pub.publish(Float64MultiArray(data=data))
+            self.graph.publish_efforts(data)
             time.sleep(random.uniform(0.02, 0.06))
 
     def close(self) -> tuple[np.ndarray, int]:
         """Latencies measured (s) and commands never seen."""
-        self.spinner.stop()
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
+        self.graph.close()
         return np.array(self.latencies), len(self.pending)
 
 
@@ -185,7 +166,7 @@ def _format(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.ros.latency", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.latency", description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=builtin_scenes(), help="built-in names or YAML paths")
     parser.add_argument("--rate", type=float, default=1000.0, help="tick rate, Hz (1000)")
     parser.add_argument("--seconds", type=float, default=10.0, help="realtime run, s (10)")

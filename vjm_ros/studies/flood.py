@@ -1,9 +1,9 @@
-"""Command fuzzing and floods against a live ``vjm_sim_node``; re-run with ``python -m vjm_ros.ros.flood``.
+"""Command fuzzing and floods against a live ``vjm_sim_node``; re-run with ``python -m vjm_ros.studies.flood``.
 
 Three processes, as in a real ROS graph:
 
 1. the simulator node (realtime, ``rate`` Hz, ``command_timeout`` 0.5 s);
-2. a flooder (``python -m vjm_ros.ros.flood --publish ...``) that publishes ``flood_hz`` commands per
+2. a flooder (``python -m vjm_ros.studies.flood --publish ...``) that publishes ``flood_hz`` commands per
    second for ``seconds`` on both command topics (:class:`FuzzCommands`): valid efforts (some beyond
    the limits), NaN, Inf, wrong-length and oversized arrays, unknown, duplicate and non-actuated
    names. It then sends one last valid command, the *sentinel*, and writes what it sent to JSON;
@@ -14,7 +14,7 @@ The verdict (:func:`measure`): ticks kept (the node's late/missed counts), every
 applied is a value of a valid command (clamped to the limits) or zero, the sentinel is applied,
 warnings stay throttled (one per kind and second), and memory growth over the flood.
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.ros.flood [--scene five_bar] [--json]
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.flood [--scene five_bar] [--json]
 """
 
 from __future__ import annotations
@@ -170,27 +170,25 @@ class FuzzCommands:
 # ---------------------------------------------------------------- the flooder process
 def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, seed: int) -> int:
     """Flood the node's command topics; write what was sent to ``out`` (JSON). Returns 0."""
-    import rclpy
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64MultiArray
+    from vjm_ros.ros.probes import GraphProbe
 
     model = load_scene(scene).model
     fuzz = FuzzCommands(model.actuator_names, model.joint_names,
                         [a.limit for a in model.actuators], seed)
-    rclpy.init()
-    node = rclpy.create_node("vjm_flooder")
-    pubs = {
-        "effort_commands": node.create_publisher(
-            Float64MultiArray, f"/{node_name}/effort_commands", 10),
-        "joint_commands": node.create_publisher(JointState, f"/{node_name}/joint_commands", 10),
-    }
-    start = time.monotonic()
-    while any(p.get_subscription_count() == 0 for p in pubs.values()):
-        if time.monotonic() - start > 60.0:
-            print("vjm_flooder: the simulator's command topics never matched", file=sys.stderr)
-            return 1
-        time.sleep(0.01)
-    array_msg, named_msg = Float64MultiArray(), JointState()  # reused: publishing copies
+    with GraphProbe("vjm_flooder", commands=True, sim_node=node_name) as probe:
+        start = time.monotonic()
+        while not probe.commands_matched():
+            if time.monotonic() - start > 60.0:  # a hang guard
+                print("vjm_flooder: the simulator's command topics never matched", file=sys.stderr)
+                return 1
+            time.sleep(0.01)
+        result = _flood(probe, fuzz, rate, seconds)
+    out.write_text(json.dumps(result))
+    return 0
+
+
+def _flood(probe, fuzz: FuzzCommands, rate: float, seconds: float) -> dict:
+    """Publish ``rate`` fuzzed commands per second for ``seconds``, then the sentinel."""
     period = 1.0 / rate
     published = 0
     t0 = time.monotonic()
@@ -204,28 +202,23 @@ def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, 
             kind, topic, names, values = fuzz.next()
             data = array.array("d", values.tobytes())
             if topic == "effort_commands":
-                array_msg.data = data
-                pubs[topic].publish(array_msg)
+                probe.publish_efforts(data)
             else:
-                named_msg.name, named_msg.effort = names, data
-                pubs[topic].publish(named_msg)
+                probe.publish_named(names, data)
             published += 1
     wall = time.monotonic() - t0
     sentinel = fuzz.sentinel()
     for _ in range(5):  # a few times: a keep-last queue may drop one
-        pubs["effort_commands"].publish(Float64MultiArray(data=sentinel))
+        probe.publish_efforts(sentinel)
         time.sleep(0.02)
-    out.write_text(json.dumps({
+    return {
         "published": published,
         "wall": wall,
         "rate": published / wall,
         "sent": dict(fuzz.sent),
         "applicable": [sorted(s) for s in fuzz.applicable],
         "sentinel": sentinel,
-    }))
-    node.destroy_node()
-    rclpy.try_shutdown()
-    return 0
+    }
 
 
 # ---------------------------------------------------------------- the measurement
@@ -269,14 +262,8 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
     dict
         The figures and checks (see :func:`_format`).
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from rclpy.signals import SignalHandlerOptions
-    from sensor_msgs.msg import JointState
-
-    from vjm_ros.ros.latency import node_command
-    from vjm_ros.ros.runtime import Spinner
+    from vjm_ros.ros.probes import GraphProbe
+    from vjm_ros.studies.latency import node_command
 
     model = load_scene(scene).model
     actuated = [model.joint_names.index(a) for a in model.actuator_names]
@@ -293,14 +280,7 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             states[0] += 1
             applied.add(e)
 
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO)
-    probe = rclpy.create_node("vjm_flood_probe", context=ctx)
-    probe.create_subscription(JointState, "/joint_states", on_state,
-                              QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
-    executor = SingleThreadedExecutor(context=ctx)
-    executor.add_node(probe)
-    spinner = Spinner(executor).start()
+    probe = GraphProbe("vjm_flood_probe", on_state=on_state, depth=1000)
     node = flooder = reader = None
     row: dict = {"scene": scene, "seconds": seconds, "flood_hz": flood_hz, "rate_hz": rate,
                  "load_1min": os.getloadavg()[0]}
@@ -318,7 +298,7 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
                     raise RuntimeError("the node did not start:\n" + "".join(output))
                 time.sleep(0.01)
             flooder = subprocess.Popen(
-                [sys.executable, "-m", "vjm_ros.ros.flood", "--publish", "--scene", scene,
+                [sys.executable, "-m", "vjm_ros.studies.flood", "--publish", "--scene", scene,
                  "--flood-hz", str(flood_hz), "--seconds", str(seconds), "--seed", str(seed),
                  "--out", str(sent_file)],
                 env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -342,10 +322,7 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             for proc in (flooder, node):
                 if proc is not None and proc.stdout is not None:
                     proc.stdout.close()
-            spinner.stop()
-            executor.shutdown()
-            probe.destroy_node()
-            rclpy.try_shutdown(context=ctx)
+            probe.close()
         text = "".join(output)
         match = re.search(r"summary (\{.*\})", text)
         if node.returncode != 0 or not match:
@@ -404,7 +381,7 @@ def _format(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.ros.flood",
+    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.flood",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="five_bar", help="scene with actuators (five_bar)")
     parser.add_argument("--seconds", type=float, default=10.0, help="length of the flood, s (10)")

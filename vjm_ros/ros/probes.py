@@ -1,0 +1,92 @@
+"""A probe node for measurements: watches ``/joint_states`` and commands the simulator.
+
+The measurement tools (:mod:`vjm_ros.studies.latency`, :mod:`vjm_ros.studies.flood`) run the
+simulator as a separate process, as users do, and talk to it through this probe: a node in a
+context of its own, spun in a background thread, so that it can be opened and closed inside any
+process (including a test) without touching the global rclpy context.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from vjm_ros.ros.node import NODE_NAME
+from vjm_ros.ros.runtime import Spinner
+
+
+class GraphProbe:
+    """A node of its own that watches ``/joint_states`` and publishes effort commands.
+
+    Parameters
+    ----------
+    name : str
+        Node name of the probe.
+    on_state : callable, optional
+        Called with each ``sensor_msgs/JointState`` received (in the probe's executor thread).
+    depth : int
+        Keep-last depth of the (reliable) ``/joint_states`` subscription.
+    commands : bool
+        Create publishers on the simulator's ``~/effort_commands`` and ``~/joint_commands``.
+    sim_node : str
+        Name of the simulator node.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        on_state: Callable[[JointState], None] | None = None,
+        depth: int = 1000,
+        commands: bool = False,
+        sim_node: str = NODE_NAME,
+    ) -> None:
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.ctx)
+        self._array, self._named = Float64MultiArray(), JointState()  # reused: publish copies
+        self.efforts = self.named = None
+        if commands:
+            self.efforts = self.node.create_publisher(
+                Float64MultiArray, f"/{sim_node}/effort_commands", 10)
+            self.named = self.node.create_publisher(JointState, f"/{sim_node}/joint_commands", 10)
+        if on_state is not None:
+            self.node.create_subscription(
+                JointState, "/joint_states", on_state,
+                QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.spinner = Spinner(self.executor).start()
+
+    def commands_matched(self) -> bool:
+        """Whether the simulator subscribes to every command topic of the probe."""
+        pubs = [p for p in (self.efforts, self.named) if p is not None]
+        return bool(pubs) and all(p.get_subscription_count() > 0 for p in pubs)
+
+    def publish_efforts(self, values: Sequence[float]) -> None:
+        """One ``~/effort_commands`` message (values in the scene's actuator order, N m or N)."""
+        self._array.data = values
+        self.efforts.publish(self._array)
+
+    def publish_named(self, names: Sequence[str], values: Sequence[float]) -> None:
+        """One ``~/joint_commands`` message (efforts matched by joint name)."""
+        self._named.name, self._named.effort = names, values
+        self.named.publish(self._named)
+
+    def close(self) -> None:
+        """Stop spinning and shut the probe's context down."""
+        self.spinner.stop()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+    def __enter__(self) -> GraphProbe:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
