@@ -158,12 +158,37 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
     model = traj.model
     t = traj["t"]
     segments = traj["segments"]
-    points = traj["points"]
     fig = _new_figure(_CYCLOGRAPH_SIZE)
     ax = fig.add_subplot()
-
     poses = _pose_rows(t, N_POSES)
-    shade = np.linspace(0.0, 1.0, len(poses)) if len(poses) > 1 else np.ones(1)
+    cmaps, handles = _draw_poses(ax, model, segments[poses])
+    handles += _draw_traces(ax, model, traj["points"], cmaps)
+    handles += _draw_ground(ax, _ground_geometry(model, segments[0]))
+    ax.autoscale_view()
+    ax.margins(0.08)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, lw=0.4, alpha=0.5)
+    if len(poses) > 1:
+        when = f"{len(poses)} poses over t = {t[0]:.3g} to {t[-1]:.3g} s"
+    else:
+        when = f"pose at t = {t[0]:.3g} s"
+    ax.set_title(f"{name}: chrono-cyclograph, {when}")
+    _legend(ax, handles, below=True)
+    if len(poses) > 1:
+        single = len(model.chains) == 1
+        bar_map = cmaps[0] if single else _shade_map((0.0, 0.0, 0.0))
+        t_end = t[-1] if t[-1] > t[0] else t[0] + 1.0
+        sm = ScalarMappable(norm=Normalize(t[0], t_end), cmap=bar_map)
+        bar = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
+        bar.set_label("pose time t (s)" + ("" if single else ", shade of each chain colour"))
+    return fig
+
+
+def _draw_poses(ax, model, pose_segments: np.ndarray) -> tuple[list, list]:
+    """Each chain's links at the chosen poses, later poses darker; its colour maps and legend."""
+    shade = np.linspace(0.0, 1.0, len(pose_segments)) if len(pose_segments) > 1 else np.ones(1)
     handles: list = []
     cmaps = []
     for c, chain in enumerate(model.chains):
@@ -173,7 +198,7 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
         style = _chain_style(c)
         if not chain.links:
             continue
-        lines = _chain_polylines(segments[poses], chain.links)
+        lines = _chain_polylines(pose_segments, chain.links)
         coll = LineCollection(
             list(lines),
             colors=cmap(0.15 + 0.85 * shade),
@@ -185,7 +210,12 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
         last = lines[-1]
         ax.plot(last[:, 0], last[:, 1], "o", ms=3.0, color=cmap(1.0), zorder=3)
         handles.append(Line2D([], [], color=base, lw=1.5, ls=style, label=f"{chain.name} links"))
+    return cmaps, handles
 
+
+def _draw_traces(ax, model, points: np.ndarray, cmaps: list) -> list:
+    """The path of every named point (chain tips in their chain's colour); legend handles."""
+    handles = []
     tip_chain = {f"{ch.name}_tip": c for c, ch in enumerate(model.chains)}
     for p, point in enumerate(model.points):
         xy = points[:, p]
@@ -202,8 +232,12 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
             label=f"{point.name} trace",
         )
         handles.append(line)
+    return handles
 
-    ground = _ground_geometry(model, segments[0])
+
+def _draw_ground(ax, ground) -> list:
+    """Ground links, slider guides and ground pivots; legend handles."""
+    handles = []
     for k, (start, end) in enumerate(ground.links):
         ax.plot(*np.transpose([start, end]), color="0.25", lw=2.5, solid_capstyle="round", zorder=1)
         if k == 0:
@@ -218,28 +252,7 @@ def chrono_cyclograph_figure(traj: Trajectory, name: str) -> Figure:
         ax.plot(ground.pivots[:, 0], ground.pivots[:, 1], zorder=5, **pivot_style)
         ax.plot(ground.pivots[:, 0], ground.pivots[:, 1], "k.", ms=4, zorder=6)
         handles.append(Line2D([], [], label="ground point", **pivot_style))
-
-    ax.autoscale_view()
-    ax.margins(0.08)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.grid(True, lw=0.4, alpha=0.5)
-    if len(poses) > 1:
-        when = f"{len(poses)} poses over t = {t[0]:.3g} to {t[-1]:.3g} s"
-    else:
-        when = f"pose at t = {t[0]:.3g} s"
-    ax.set_title(f"{name}: chrono-cyclograph, {when}")
-    _legend(ax, handles, below=True)
-
-    if len(poses) > 1:
-        single = len(model.chains) == 1
-        bar_map = cmaps[0] if single else _shade_map((0.0, 0.0, 0.0))
-        t_end = t[-1] if t[-1] > t[0] else t[0] + 1.0
-        sm = ScalarMappable(norm=Normalize(t[0], t_end), cmap=bar_map)
-        bar = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
-        bar.set_label("pose time t (s)" + ("" if single else ", shade of each chain colour"))
-    return fig
+    return handles
 
 
 def displacements_figure(traj: Trajectory, name: str) -> Figure:
