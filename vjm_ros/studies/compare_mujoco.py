@@ -163,60 +163,13 @@ def model_to_mjcf(model: Model, settings: MujocoSettings | None = None) -> str:
         "  </option>",
         "  <worldbody>",
     ]
-    ground_sites = []
-    for cl in model.closures:
-        if cl.target.link == GROUND:
-            ground_sites.append(f'    <site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>')
-    lines += ground_sites
+    lines += [
+        f'    <site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>'
+        for cl in model.closures
+        if cl.target.link == GROUND
+    ]
     for chain in model.chains:
-        depth = 0
-        pred_theta = chain.angle
-        for pos, i in enumerate(chain.links):
-            link, joint = model.links[i], model.joints[i]
-            slide = joint.slide if joint.kind == REVOLUTE else q[i]
-            phi = float(kin.theta[i] - pred_theta)
-            indent = "    " + "  " * depth
-            if pos == 0:
-                th1, a1 = chain.angle, chain.length
-                o = (
-                    np.asarray(chain.origin, dtype=float)
-                    + a1 * np.array([math.cos(th1), math.sin(th1)])
-                    + slide * np.array([-math.sin(th1), math.cos(th1)])
-                )
-                lines.append(
-                    f'{indent}<body name="{link.name}" pos="{_vec(o[0], o[1], 0.0)}" '
-                    f'euler="{_vec(0.0, 0.0, kin.theta[i])}">'
-                )
-            else:
-                prev = model.links[chain.links[pos - 1]]
-                lines.append(
-                    f'{indent}<body name="{link.name}" pos="{_vec(prev.length, slide, 0.0)}" '
-                    f'euler="{_vec(0.0, 0.0, phi)}">'
-                )
-            inner = indent + "  "
-            if joint.kind == REVOLUTE:
-                lines.append(f'{inner}<joint name="{joint.name}" type="hinge" axis="0 0 1"/>')
-            else:
-                axis = _vec(math.sin(phi), math.cos(phi), 0.0)
-                lines.append(f'{inner}<joint name="{joint.name}" type="slide" axis="{axis}"/>')
-            inertia = float(link.inertia)
-            lines.append(
-                f'{inner}<inertial pos="{_vec(*link.com, 0.0)}" mass="{_f(max(link.mass, eps))}" '
-                f'diaginertia="{_vec(inertia / 2 + eps, inertia / 2 + eps, inertia + eps)}"/>'
-            )
-            lines.append(f'{inner}<site name="end_{link.name}" pos="{_vec(link.length, 0.0, 0.0)}"/>')
-            for p in model.points:
-                if p.ref.link == i:
-                    lines.append(f'{inner}<site name="pt_{p.name}" pos="{_vec(*p.ref.local, 0.0)}"/>')
-            for cl in model.closures:
-                if cl.point.link == i:
-                    lines.append(f'{inner}<site name="cl_{cl.name}_a" pos="{_vec(*cl.point.local, 0.0)}"/>')
-                if cl.target.link == i:
-                    lines.append(f'{inner}<site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>')
-            pred_theta = float(kin.theta[i])
-            depth += 1
-        for d in range(depth - 1, -1, -1):
-            lines.append("    " + "  " * d + "</body>")
+        lines += _chain_bodies(model, chain, q, kin.theta, eps)
     lines.append("  </worldbody>")
     if model.closures:
         lines.append("  <equality>")
@@ -236,6 +189,65 @@ def model_to_mjcf(model: Model, settings: MujocoSettings | None = None) -> str:
         lines.append("  </actuator>")
     lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
+
+
+def _chain_bodies(model: Model, chain, q: np.ndarray, theta: np.ndarray, eps: float) -> list[str]:
+    """MJCF bodies of one chain, nested link after link, at the pose ``q``."""
+    lines = []
+    pred_theta = chain.angle
+    for pos, i in enumerate(chain.links):
+        link, joint = model.links[i], model.joints[i]
+        slide = joint.slide if joint.kind == REVOLUTE else q[i]
+        phi = float(theta[i] - pred_theta)
+        indent = "    " + "  " * pos
+        if pos == 0:
+            th1, a1 = chain.angle, chain.length
+            o = (
+                np.asarray(chain.origin, dtype=float)
+                + a1 * np.array([math.cos(th1), math.sin(th1)])
+                + slide * np.array([-math.sin(th1), math.cos(th1)])
+            )
+            lines.append(
+                f'{indent}<body name="{link.name}" pos="{_vec(o[0], o[1], 0.0)}" '
+                f'euler="{_vec(0.0, 0.0, theta[i])}">'
+            )
+        else:
+            prev = model.links[chain.links[pos - 1]]
+            lines.append(
+                f'{indent}<body name="{link.name}" pos="{_vec(prev.length, slide, 0.0)}" '
+                f'euler="{_vec(0.0, 0.0, phi)}">'
+            )
+        lines += _link_contents(model, i, phi, indent + "  ", eps)
+        pred_theta = float(theta[i])
+    for d in range(len(chain.links) - 1, -1, -1):
+        lines.append("    " + "  " * d + "</body>")
+    return lines
+
+
+def _link_contents(model: Model, i: int, phi: float, inner: str, eps: float) -> list[str]:
+    """Joint, inertial and sites of link ``i`` (relative angle to its predecessor ``phi``)."""
+    link, joint = model.links[i], model.joints[i]
+    lines = []
+    if joint.kind == REVOLUTE:
+        lines.append(f'{inner}<joint name="{joint.name}" type="hinge" axis="0 0 1"/>')
+    else:
+        axis = _vec(math.sin(phi), math.cos(phi), 0.0)
+        lines.append(f'{inner}<joint name="{joint.name}" type="slide" axis="{axis}"/>')
+    inertia = float(link.inertia)
+    lines.append(
+        f'{inner}<inertial pos="{_vec(*link.com, 0.0)}" mass="{_f(max(link.mass, eps))}" '
+        f'diaginertia="{_vec(inertia / 2 + eps, inertia / 2 + eps, inertia + eps)}"/>'
+    )
+    lines.append(f'{inner}<site name="end_{link.name}" pos="{_vec(link.length, 0.0, 0.0)}"/>')
+    for p in model.points:
+        if p.ref.link == i:
+            lines.append(f'{inner}<site name="pt_{p.name}" pos="{_vec(*p.ref.local, 0.0)}"/>')
+    for cl in model.closures:
+        if cl.point.link == i:
+            lines.append(f'{inner}<site name="cl_{cl.name}_a" pos="{_vec(*cl.point.local, 0.0)}"/>')
+        if cl.target.link == i:
+            lines.append(f'{inner}<site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>')
+    return lines
 
 
 class MujocoSimulator:
