@@ -263,7 +263,7 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
         The figures and checks (see :func:`_format`).
     """
     from vjm_ros.ros.probes import GraphProbe
-    from vjm_ros.studies.latency import node_command
+    from vjm_ros.studies.latency import node_command, node_summary
 
     model = load_scene(scene).model
     actuated = [model.joint_names.index(a) for a in model.actuator_names]
@@ -312,34 +312,44 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             memory.append((time.monotonic(), rss_mb(node.pid)))
             node.wait(timeout=duration + 60.0)
         finally:
-            for proc in (flooder, node):
-                if proc is not None:
-                    if proc.poll() is None:
-                        proc.kill()
-                        proc.wait()
-            if reader is not None:
-                reader.join(10.0)
-            for proc in (flooder, node):
-                if proc is not None and proc.stdout is not None:
-                    proc.stdout.close()
+            _reap((flooder, node), reader)
             probe.close()
         text = "".join(output)
-        match = re.search(r"summary (\{.*\})", text)
-        if node.returncode != 0 or not match:
-            raise RuntimeError(f"the node failed (exit code {node.returncode}):\n{text}")
-        summary = json.loads(match.group(1))
+        summary = node_summary(node.returncode, text)
         sent = json.loads(sent_file.read_text())
+    row.update(_figures(sent, summary, applied, text, memory, duration * rate))
+    row["states_seen"] = states[0]
+    row["load_1min_end"] = os.getloadavg()[0]
+    return row
+
+
+def _reap(procs, reader: threading.Thread | None) -> None:
+    """Kill what still runs, then close the pipes once their reader is done."""
+    for proc in procs:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    if reader is not None:
+        reader.join(10.0)
+    for proc in procs:
+        if proc is not None and proc.stdout is not None:
+            proc.stdout.close()
+
+
+def _figures(sent: dict, summary: dict, applied: set, text: str, memory: list,
+             expected_ticks: float) -> dict:
+    """The verdict of one flood from what was sent, the node's summary and log, and memory."""
     allowed = [set(v) | {0.0} for v in sent["applicable"]]
     foreign = sorted(e for e in applied
                      if any(x not in ok for x, ok in zip(e, allowed, strict=True)))
     warnings = Counter(m.group(1) for m in WARNING.finditer(text))
     mb = np.array([m for _, m in memory if not math.isnan(m)])
-    row.update({
+    return {
         "published": sent["published"],
         "flood_rate": sent["rate"],
         "sent": sent["sent"],
         "ticks": summary["ticks"],
-        "expected_ticks": round(duration * rate),
+        "expected_ticks": round(expected_ticks),
         "late_ticks": summary["late_ticks"],
         "missed_ticks": summary["missed_ticks"],
         "resyncs": summary["resyncs"],
@@ -347,7 +357,6 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
         "kept": 1.0 - summary["missed_ticks"] / max(summary["ticks"], 1),
         "commands_accepted": summary["commands_accepted"],
         "commands_rejected": summary["commands_rejected"],
-        "states_seen": states[0],
         "distinct_efforts": len(applied),
         "foreign_efforts": [list(e) for e in foreign[:5]],
         "n_foreign": len(foreign),
@@ -359,9 +368,7 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
         "rss_end_mb": float(mb[-1]) if mb.size else math.nan,
         "rss_series_mb": [round(float(m), 2) for m in mb],
         "realtime_priority_granted": "tick loop at SCHED_FIFO priority" in text,
-        "load_1min_end": os.getloadavg()[0],
-    })
-    return row
+    }
 
 
 def _format(row: dict) -> str:

@@ -55,9 +55,14 @@ def run_node(cmd: list[str], during=None, timeout: float = 600.0) -> dict:
         if proc.poll() is None:
             proc.kill()
             out, _ = proc.communicate()
-    match = re.search(r"summary (\{.*\})", out)
-    if proc.returncode != 0 or not match:
-        raise RuntimeError(f"the node failed (exit code {proc.returncode}):\n{out}")
+    return node_summary(proc.returncode, out)
+
+
+def node_summary(returncode: int, output: str) -> dict:
+    """The exit summary the node prints (``summary {...}``); RuntimeError if it failed."""
+    match = re.search(r"summary (\{.*\})", output)
+    if returncode != 0 or not match:
+        raise RuntimeError(f"the node failed (exit code {returncode}):\n{output}")
     return json.loads(match.group(1))
 
 
