@@ -98,8 +98,27 @@ def render_docs(results: dict, rows: dict[str, list[RowResult]]) -> str:
         "## Recommended settings",
         "",
     ]
-    rec = results.get("recommended", {})
-    lines += _overall_table(rec, len(rows)) + [""]
+    lines += _recommended_text(results.get("recommended", {}), len(rows))
+    lines += ["## Findings", ""]
+    lines += _findings(results, rows)
+    lines += ["### Settings at 1 kHz, one step per tick", "",
+              "What a live node can use, worst case over the benched scenes:", "",
+              *live_table(rows), ""]
+    for name, rs in rows.items():
+        lines += _scene_text(name, rs, results)
+    if "scaling" in results:
+        sc = _scaling_text(results["scaling"])
+        sc = [ln.replace("(scaling.png)", f"(figures/{results['figures'].get('scaling', 'scaling.png')})")
+              for ln in sc]
+        lines += sc
+    lines += _long_runs_text(results.get("long_runs", []))
+    lines += _extremes_text()
+    return "\n".join(lines) + "\n"
+
+
+def _recommended_text(rec: dict, n_scenes: int) -> list[str]:
+    """The recommended settings: the table, live control at 1 kHz, and each offline tier."""
+    lines = _overall_table(rec, n_scenes) + [""]
     live = rec.get("live 1 kHz")
     if live:
         lines += [
@@ -122,32 +141,23 @@ def render_docs(results: dict, rows: dict[str, list[RowResult]]) -> str:
         else:
             lines += [f"**Offline, position error within {tier}**: no single setting of the grid "
                       "reaches it on every scene; see the per-scene tables below.", ""]
-    lines += ["## Findings", ""]
-    lines += _findings(results, rows)
-    lines += ["### Settings at 1 kHz, one step per tick", "",
-              "What a live node can use, worst case over the benched scenes:", "",
-              *live_table(rows), ""]
-    for name, rs in rows.items():
-        sm = results["scenes"][name]
-        fig = results["figures"].get(name)
-        lines += [f"## {name}", "",
-                  f"Horizon {sm['horizon']:g} s. {_ref_line(sm['reference'])}", ""]
-        if fig:
-            lines += [f"![{name}: position error against cost](figures/{fig})", ""]
-        lines += ["Recommended per tier:", "", *_tier_table(sm["recommended"]), "",
-                  "Pareto front (vjm):", "",
-                  *_front_table(pareto_front([r for r in rs if r.engine == "vjm"])), ""]
-        if sm["matched_accuracy"]:
-            lines += ["vjm against MuJoCo at matched accuracy (cheapest row of each within the "
-                      "position error):", "", *_match_table(sm["matched_accuracy"]), ""]
-    if "scaling" in results:
-        sc = _scaling_text(results["scaling"])
-        sc = [ln.replace("(scaling.png)", f"(figures/{results['figures'].get('scaling', 'scaling.png')})")
-              for ln in sc]
-        lines += sc
-    lines += _long_runs_text(results.get("long_runs", []))
-    lines += _extremes_text()
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _scene_text(name: str, rs: list[RowResult], results: dict) -> list[str]:
+    """One scene's section: horizon, reference, figure, tiers, Pareto front, MuJoCo match."""
+    sm = results["scenes"][name]
+    fig = results["figures"].get(name)
+    lines = [f"## {name}", "", f"Horizon {sm['horizon']:g} s. {_ref_line(sm['reference'])}", ""]
+    if fig:
+        lines += [f"![{name}: position error against cost](figures/{fig})", ""]
+    lines += ["Recommended per tier:", "", *_tier_table(sm["recommended"]), "",
+              "Pareto front (vjm):", "",
+              *_front_table(pareto_front([r for r in rs if r.engine == "vjm"])), ""]
+    if sm["matched_accuracy"]:
+        lines += ["vjm against MuJoCo at matched accuracy (cheapest row of each within the "
+                  "position error):", "", *_match_table(sm["matched_accuracy"]), ""]
+    return lines
 
 
 def _docs_command(meta: dict, scenes: list[str]) -> str:
