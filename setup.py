@@ -27,18 +27,18 @@ setup(
         "mcap>=1.4,<2",
         "mcap-ros2-support>=0.5,<1",
         "rerun-sdk>=0.41,<0.42",
+        # ROS 2 message definitions and type hashes for the logs (a pure-Python bag library).
+        "rosbags>=0.11,<0.12",
         # Compiled physics kernel (vjm_ros/core/kernels.py): ~30x per evaluation. 0.64 is the first
         # release whose requirements admit numpy 2.4; without numba the numpy reference is used.
         "numba>=0.64,<1",
     ],
     extras_require={
-        # rosbags: a third-party ROS 2 bag reader, so the tests read our logs with code not ours.
         "test": [
             "pytest>=8",
             "pytest-benchmark>=4",
             "hypothesis>=6.100",
             "ruff>=0.5",
-            "rosbags>=0.11,<0.12",
             # Holds the package's layering (docs/design.md section 7) in the test suite.
             "import-linter>=2.16,<3",
         ],

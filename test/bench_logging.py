@@ -43,3 +43,33 @@ def test_rerun_logging_cost_per_tick(benchmark, run, tmp_path, batch):
         benchmark.extra_info["per_tick_us"] = per_tick * 1e6
         print(f"rerun logging, batch={batch}: {per_tick * 1e6:.1f} us per tick")
         assert per_tick < TARGET_PER_TICK
+
+
+@pytest.mark.parametrize("path", ["fast_path", "rosbags_from_dict"])
+@pytest.mark.parametrize("kind", ["joint_state", "wrench_stamped", "markers"])
+def test_per_tick_encoding_cost(benchmark, run, path, kind):
+    """A per-tick message: the fixed-layout fast path against rosbags' serializer from the dict.
+
+    The fast paths stay only while they are measurably faster (test_cdr_rosbags.py checks that
+    they write the same bytes).
+    """
+    from vjm_ros.logs import cdr, messages
+
+    scene, _, samples = run
+    s, ns = samples[-1], 1_234_567_890
+    names = scene.model.joint_names
+    if kind == "joint_state":
+        fast = cdr.joint_state_encoder(names)
+        args, slow = (ns, s.q, s.qd, s.effort), (messages.JOINT_STATE,
+                                                  messages.joint_state(names, s, ns))
+    elif kind == "markers":
+        value = messages.markers(s, ns)
+        fast, args, slow = cdr.encode_markers, (value,), (messages.MARKER_ARRAY, value)
+    else:
+        fast = cdr.wrench_stamped_encoder()
+        args, slow = (ns, *s.closure_force[0]), (messages.WRENCH_STAMPED,
+                                                 messages.wrench(s, 0, ns))
+    if path == "fast_path":
+        benchmark(fast, *args)
+    else:
+        benchmark(cdr.encode, *slow)

@@ -237,7 +237,7 @@ class McapRecorder(Recorder):
         put(self._ch_clock, cdr.encode_clock(ns), ns)
         if self.marker_every > 0 and self.samples % self.marker_every == 0:
             markers = messages.markers(sample, ns, self.force_scale)
-            self._add(self.topics.markers, messages.MARKER_ARRAY, markers, ns)
+            self._put(self._channels[self.topics.markers], cdr.encode_markers(markers), ns)
         self.samples += 1
         self._maybe_flush(ns)
 
