@@ -43,7 +43,7 @@ STRING = "std_msgs/msg/String"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 
 # visualization_msgs/Marker constants
-ARROW, LINE_LIST, SPHERE_LIST = 0, 5, 7
+ARROW, LINE_STRIP, LINE_LIST, SPHERE_LIST = 0, 4, 5, 7
 ADD = 0
 
 
@@ -262,18 +262,70 @@ def marker(
     }
 
 
-def markers(sample, ns: int, force_scale: float = 0.01, line_width: float = 0.01) -> dict:
-    """``visualization_msgs/MarkerArray`` drawing the mechanism.
+LINE_WIDTH = 0.01
+"""Width of the link lines, m."""
+FORCE_SCALE = 0.01
+"""Length of the constraint-force arrows per newton, m/N."""
+
+
+def marker_specs(
+    sample,
+    force_scale: float = FORCE_SCALE,
+    line_width: float = LINE_WIDTH,
+    trace: Sequence[np.ndarray] = (),
+) -> list[tuple]:
+    """What the mechanism's markers draw, once for the logs and the node.
 
     Markers: ``links`` (id 0, ``LINE_LIST``: start and end of every link), ``joints`` (id 1,
-    ``SPHERE_LIST``: link origins and named points such as chain tips) and ``constraint_forces``
-    (ids 0..k-1, one ``ARROW`` per closure from its point along ``force_scale * (fx, fy)``).
+    ``SPHERE_LIST``: link origins and named points such as chain tips), ``constraint_forces``
+    (ids 0..k-1, one ``ARROW`` per closure from its point along ``force_scale * (fx, fy)``) and,
+    when ``trace`` is given, ``tip_trace`` (one ``LINE_STRIP`` per chain tip with two or more
+    positions).
 
     Parameters
     ----------
     sample : Sample
         ``segments`` (n, 2, 2), ``points`` (n_points, 2), ``closure_points`` (k, 2),
         ``closure_force`` (k, 3).
+    force_scale : float
+        Arrow length per newton, m/N.
+    line_width : float
+        Link line width, m.
+    trace : sequence of ndarray, shape (m, 2)
+        Recent positions of each chain tip, m.
+
+    Returns
+    -------
+    list of tuple
+        ``(namespace, id, kind, points (m, 2) in m, scale (3,) in m, rgba (4,))`` per marker.
+    """
+    w = line_width
+    segments = np.asarray(sample.segments)
+    joints = np.vstack((segments[:, 0, :], np.asarray(sample.points).reshape(-1, 2)))
+    specs = [
+        ("links", 0, LINE_LIST, segments.reshape(-1, 2), (w, 0.0, 0.0), (0.2, 0.4, 0.9, 1.0)),
+        ("joints", 1, SPHERE_LIST, joints, (3 * w,) * 3, (0.1, 0.1, 0.1, 1.0)),
+    ]
+    for i, (p, f) in enumerate(zip(sample.closure_points, sample.closure_force, strict=True)):
+        arrow = np.array([p, np.asarray(p) + force_scale * np.asarray(f[:2])])
+        specs.append(
+            ("constraint_forces", i, ARROW, arrow, (w, 2 * w, 0.0), (0.9, 0.2, 0.1, 1.0))
+        )
+    for i, strip in enumerate(trace):
+        if len(strip) >= 2:
+            specs.append(
+                ("tip_trace", i, LINE_STRIP, np.asarray(strip), (0.5 * w, 0.0, 0.0),
+                 (0.1, 0.6, 0.2, 0.8))
+            )
+    return specs
+
+
+def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float = LINE_WIDTH) -> dict:
+    """``visualization_msgs/MarkerArray`` drawing the mechanism (:func:`marker_specs`).
+
+    Parameters
+    ----------
+    sample : Sample
     ns : int
         Header stamp, ns.
     force_scale : float
@@ -281,25 +333,11 @@ def markers(sample, ns: int, force_scale: float = 0.01, line_width: float = 0.01
     line_width : float
         Link line width, m.
     """
-    seg = np.asarray(sample.segments).reshape(-1, 2)
-    joints = np.vstack(
-        (np.asarray(sample.segments)[:, 0, :], np.asarray(sample.points).reshape(-1, 2))
-    )
-    out = [
-        marker(ns, "links", 0, LINE_LIST, seg, (line_width, 0.0, 0.0), _rgba(0.2, 0.4, 0.9)),
-        marker(ns, "joints", 1, SPHERE_LIST, joints, (3 * line_width,) * 3, _rgba(0.1, 0.1, 0.1)),
-    ]
-    for i, (p, f) in enumerate(zip(sample.closure_points, sample.closure_force, strict=True)):
-        tip = np.asarray(p) + force_scale * np.asarray(f[:2])
-        out.append(
-            marker(
-                ns,
-                "constraint_forces",
-                i,
-                ARROW,
-                np.array([p, tip]),
-                (line_width, 2 * line_width, 0.0),
-                _rgba(0.9, 0.2, 0.1),
+    return {
+        "markers": [
+            marker(ns, namespace, marker_id, kind, points, scale, _rgba(*rgba))
+            for namespace, marker_id, kind, points, scale, rgba in marker_specs(
+                sample, force_scale, line_width
             )
-        )
-    return {"markers": out}
+        ]
+    }

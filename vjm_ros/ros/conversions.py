@@ -149,12 +149,6 @@ def wrench_topic(closure: str) -> str:
 
 
 # ---------------------------------------------------------------- markers
-LINE_WIDTH = 0.01
-"""Width of the link lines, m (as in the MCAP log's markers)."""
-FORCE_SCALE = 0.01
-"""Length of the force arrows per newton, m/N."""
-
-
 def _marker(when: Time, namespace: str, marker_id: int, kind: int, points: np.ndarray,
             scale: tuple[float, float, float], rgba: tuple[float, float, float, float]) -> Marker:
     m = Marker()
@@ -211,13 +205,14 @@ class TipTrace:
         return [np.array(list(trace)).reshape(-1, 2) for trace in self._points]
 
 
-def markers(sample: Sample, trace: Iterable[np.ndarray] = (), force_scale: float = FORCE_SCALE) -> MarkerArray:
+def markers(
+    sample: Sample, trace: Iterable[np.ndarray] = (), force_scale: float = layouts.FORCE_SCALE
+) -> MarkerArray:
     """``visualization_msgs/MarkerArray`` of the mechanism, frame ``world``.
 
-    The markers of :func:`vjm_ros.logs.messages.markers` (``links``: a ``LINE_LIST`` of every
-    link; ``joints``: a ``SPHERE_LIST`` of the link origins and named points; ``constraint_forces``:
-    one ``ARROW`` per closure from its point along ``force_scale * (fx, fy)``), built directly for
-    speed, plus one ``LINE_STRIP`` per chain tip in namespace ``tip_trace``.
+    The markers of :func:`vjm_ros.logs.messages.marker_specs` (links, joints, constraint-force
+    arrows and one ``LINE_STRIP`` per chain tip in namespace ``tip_trace``), filled field by
+    field.
 
     Parameters
     ----------
@@ -230,23 +225,8 @@ def markers(sample: Sample, trace: Iterable[np.ndarray] = (), force_scale: float
         Arrow length per newton, m/N.
     """
     when = stamp(sample.t)
-    w = LINE_WIDTH
-    segments = np.asarray(sample.segments)
-    joints = np.vstack((segments[:, 0, :], np.asarray(sample.points).reshape(-1, 2)))
-    out = [
-        _marker(when, "links", 0, Marker.LINE_LIST, segments.reshape(-1, 2), (w, 0.0, 0.0),
-                (0.2, 0.4, 0.9, 1.0)),
-        _marker(when, "joints", 1, Marker.SPHERE_LIST, joints, (3 * w,) * 3, (0.1, 0.1, 0.1, 1.0)),
-    ]
-    for i, (p, f) in enumerate(zip(sample.closure_points, sample.closure_force, strict=True)):
-        arrow = np.array([p, np.asarray(p) + force_scale * np.asarray(f[:2])])
-        out.append(_marker(when, "constraint_forces", i, Marker.ARROW, arrow, (w, 2 * w, 0.0),
-                           (0.9, 0.2, 0.1, 1.0)))
-    for i, strip in enumerate(trace):
-        if len(strip) >= 2:
-            out.append(_marker(when, "tip_trace", i, Marker.LINE_STRIP, strip, (0.5 * w, 0.0, 0.0),
-                               (0.1, 0.6, 0.2, 0.8)))
-    return MarkerArray(markers=out)
+    specs = layouts.marker_specs(sample, force_scale, trace=list(trace))
+    return MarkerArray(markers=[_marker(when, *spec) for spec in specs])
 
 
 # ---------------------------------------------------------------- diagnostics
