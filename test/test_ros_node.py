@@ -224,7 +224,7 @@ def test_live_messages_equal_the_logged_ones():
         Float64MultiArray(), log.energy(s))
     assert conv.wrench(s.closure_force[0], s.t) == fill(WrenchStamped(), log.wrench(s, 0, ns))
     assert conv.clock(s.t) == fill(Clock(), log.clock(ns))
-    assert conv.markers(s) == fill(MarkerArray(), log.markers(s, ns))
+    assert conv.markers(s, s.t) == fill(MarkerArray(), log.markers(s, ns))
     assert conv.wrench_topic("pin") == "~" + log.Topics().wrench("pin")[len(NODE):]
 
 
@@ -420,10 +420,17 @@ def test_pause_step_reset_services(harness):
     assert res.success and "reset to the initial state" in res.message
     wait_for(lambda: len(h.messages("/joint_states")) == count + 2, 10.0, "the reset state")
     first, latest = h.messages("/joint_states")[0], h.messages("/joint_states")[-1]
-    assert nanoseconds(latest.header.stamp) == 0 and list(latest.position) == list(first.position)
+    # Back to the initial state, but simulated time goes on: one tick after the last stamp.
+    restart = t_last + 2 * 10_000_000
+    assert nanoseconds(latest.header.stamp) == restart
+    assert list(latest.position) == list(first.position)
+    assert res.message.endswith(f"goes on from t = {restart * 1e-9:.6g} s")
     assert h.call(SetBool, f"{NODE}/pause", SetBool.Request(data=False)).success
     wait_for(lambda: len(h.messages("/joint_states")) > count + 5, 10.0, "running again")
-    assert stamps_ns(h.messages("/joint_states")[count + 1: count + 4]) == [0, 10_000_000, 20_000_000]
+    assert stamps_ns(h.messages("/joint_states")[count + 1: count + 4]) == [
+        restart, restart + 10_000_000, restart + 20_000_000]
+    clocks = [nanoseconds(m.clock) for m in h.messages("/clock")]
+    assert clocks and all(b > a for a, b in zip(clocks, clocks[1:], strict=False))
     res = h.call(Trigger, f"{NODE}/step", Trigger.Request())
     assert not res.success and "not paused" in res.message
     events = [m.data.split(":")[0] for m in h.messages(f"{NODE}/events")]
@@ -457,7 +464,9 @@ def test_parameters_are_validated_at_run_time(harness):
     assert h.node.loop.sim.dt == 0.001  # applies at the next reset
     assert h.call(Trigger, f"{NODE}/reset", Trigger.Request()).success
     assert h.node.loop.sim.dt == 0.002
-    assert h.call(Trigger, f"{NODE}/step", Trigger.Request()).message == "stepped to t = 0.002 s"
+    # simulated time goes on: the new episode starts one (new) tick after t = 0, the step ends
+    # one tick later
+    assert h.call(Trigger, f"{NODE}/step", Trigger.Request()).message == "stepped to t = 0.004 s"
     assert set_param("scene", "five_bar").successful  # another mechanism at the next reset
     assert h.call(Trigger, f"{NODE}/reset", Trigger.Request()).success
     wait_for(lambda: h.messages("/joint_states")[-1].name[0] == "left_base", 10.0, "five_bar")

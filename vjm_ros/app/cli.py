@@ -112,6 +112,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--out", type=Path, help="directory for trajectory.csv and summary.json")
     r.add_argument("--mcap", type=Path, help="write a ROS 2 MCAP log")
+    r.add_argument("--bag", type=Path, metavar="DIR",
+                   help="write a rosbag2 directory (metadata.yaml and DIR_0.mcap)")
     r.add_argument("--rrd", help="write a rerun recording (.rrd path, 'spawn' or 'connect')")
     r.add_argument(
         "--plots", action="store_true", help="write the thesis figure set (PNG) to --out"
@@ -243,7 +245,8 @@ def _cmd_run(args) -> int:
     wall0 = time.perf_counter()
     with StopSignals() as stop:
         try:
-            logs = LogWriters(_open_recorders(args, scene, sim, duration), _report_log_failure)
+            recorders = _open_recorders(args, scene, sim, duration)
+            logs = LogWriters(recorders, _report_log_failure)
             _record(traj, logs, sim.sample())
             for _ in range(ticks):
                 if stop.requested:
@@ -258,6 +261,8 @@ def _cmd_run(args) -> int:
             progress.close()
             if logs is not None:
                 logs.close()
+                if args.bag is not None and recorders and recorders[0] in logs.active:
+                    _write_bag_metadata(args.bag, recorders[0], logs)
     if stop.code and not code:
         code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     if logs is not None and logs.failed and not code:
@@ -295,18 +300,50 @@ def _prepare_dir(path: Path) -> None:
         ) from None
 
 
+def _bag_file(bag: Path) -> Path:
+    """The MCAP file of a bag directory, named as rosbag2 names it: ``<dir>/<dir name>_0.mcap``."""
+    return bag / f"{bag.name}_0.mcap"
+
+
+def _prepare_bag(bag: Path) -> None:
+    if bag.exists() and (not bag.is_dir() or any(bag.iterdir())):
+        raise ConfigurationError(f"--bag {bag}: expected a new or empty directory, found one in use")
+    try:
+        bag.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigurationError(f"--bag {bag}: cannot create it ({exc.strerror or exc})") from None
+
+
+def _write_bag_metadata(bag: Path, recorder, logs) -> None:
+    """``metadata.yaml`` of the bag; a failure counts as a failed log (exit 4)."""
+    from vjm_ros.logs.rosbag2 import write_bag_metadata
+
+    try:
+        write_bag_metadata(bag, recorder.bag_metadata())
+    except OSError as exc:
+        where, why = str(bag / "metadata.yaml"), exc.strerror or str(exc)
+        logs.failed.append((where, why))
+        _report_log_failure(where, why)
+
+
 def _open_recorders(args, scene, sim, duration: float) -> list:
     from vjm_ros.logs.opening import open_recorders
 
+    mcap = args.mcap
+    if args.bag is not None:
+        if args.mcap is not None:
+            raise ConfigurationError("give either --mcap FILE or --bag DIR, not both")
+        _prepare_bag(args.bag)
+        mcap = _bag_file(args.bag)
     return open_recorders(
         scene.model,
         sim.describe(),
         scene.text,
-        mcap=args.mcap,
+        mcap=mcap,
         rrd=args.rrd,
         duration=duration,
         rate=sim.settings.rate,
-        keys=("--mcap", "--rrd"),
+        keys=("--bag" if args.bag is not None else "--mcap", "--rrd"),
     )
 
 

@@ -11,13 +11,22 @@ same value. After a reset the simulator's clock restarts at 0 while the log time
 :class:`vjm_ros.logs.Timebase`): the later episode starts one tick after the last message,
 and a ``reset`` string is logged on ``/<node>/events`` at that time.
 
+What rosbag2 writes, this writes too (:mod:`vjm_ros.logs.rosbag2`): the ``ros2`` profile,
+``ros2msg`` schemas named by their full type, ``cdr`` channels with the metadata
+``offered_qos_profiles`` and ``topic_type_hash``, chunk and message indexes, a Statistics record,
+and a ``rosbag2`` metadata record holding the bag's ``metadata.yaml``; :meth:`McapRecorder.
+bag_metadata` gives that document for a bag directory (``vjm run --bag``). rosbags, the ``mcap``
+reader, rerun and Foxglove read every message, in time order.
+
 Durability. Messages are grouped in small compressed chunks; a chunk is closed and handed to the
 operating system at least every ``chunk_seconds`` of simulated or wall time, so a process killed
-with SIGKILL loses at most that much. The file holds chunk indexes but no message indexes
-(:data:`INDEXES`), which keeps the writer's memory to ~6 MB per hour of recording. Such a truncated file has no summary; :func:`vjm_ros.logs.replay.
-recover` rewrites the complete chunks into a finalized copy. Use the recorder as a context manager
-(with :func:`vjm_ros.logs.finalize_on_signals` against SIGTERM) so that the summary, the
-index and the Statistics record are always written.
+with SIGKILL loses at most that much. Such a truncated file has no summary;
+:func:`vjm_ros.logs.replay.recover` rewrites the complete chunks into a finalized copy. Use the
+recorder as a context manager (with :func:`vjm_ros.logs.finalize_on_signals` against SIGTERM) so
+that the summary, the indexes and the Statistics record are always written. Memory: the writer
+keeps one chunk index (with its message-index offsets) per chunk until the file is finalized,
+~1.4 kB per chunk, i.e. about 20 MB per recorded hour at four chunks a second (measured in
+test/bench_logging.py).
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ from vjm_ros.logs import (
     messages,
     msgdefs,
     package_versions,
+    rosbag2,
     tick_of,
 )
 
@@ -52,11 +62,12 @@ _COMPRESSION = {
     "lz4": CompressionType.LZ4,
     "none": CompressionType.NONE,
 }
-INDEXES = IndexType.ALL & ~IndexType.MESSAGE
-"""Indexes written: chunk, attachment and metadata indexes, no per-chunk message indexes. The
-writer keeps every chunk's index in memory until the file is finalized: ~1.4 kB per chunk with
-message indexes, ~0.44 kB without, i.e. 20 MB against 6 MB per hour at four chunks a second.
-Readers find messages through the chunk indexes (each chunk covers at most ``chunk_seconds``)."""
+INDEXES = IndexType.ALL
+"""Indexes written: chunk, message, attachment and metadata indexes, as rosbag2 writes them.
+Readers that read in time order or by topic (rosbags, rosbag2, Foxglove) need the message
+indexes."""
+BAG_METADATA = "rosbag2"
+"""Name of the metadata record holding the bag's ``metadata.yaml`` (key ``serialized_metadata``)."""
 
 
 def _metadata_values(data: dict) -> dict[str, str]:
@@ -81,8 +92,9 @@ class McapRecorder(Recorder):
     scene_text : str
         Scene YAML, stored as the attachment ``scene.yaml`` (``model.source_text`` when empty).
     node_name : str, optional
-        Node name of the private topics ``/<node_name>/...``: ``settings["node"]`` when given,
-        else ``vjm_sim_node``.
+        Node name of the private topics ``<namespace>/<node_name>/...``: ``settings["node"]``
+        when given, else ``vjm_sim_node``; the namespace is ``settings["namespace"]`` (root when
+        absent).
     marker_every : int
         Write ``/<node>/markers`` on every ``marker_every``-th sample (and the first); 0 disables.
     chunk_seconds : float
@@ -123,7 +135,7 @@ class McapRecorder(Recorder):
         self.path = Path(path)
         self.model = model
         node_name = node_name or str(settings.get("node", "vjm_sim_node"))
-        self.topics = messages.Topics(node_name)
+        self.topics = messages.Topics(node_name, str(settings.get("namespace", "")))
         self.marker_every = int(marker_every)
         self.force_scale = float(force_scale)
         self.chunk_ns = int(chunk_seconds * 1e9)
@@ -197,19 +209,31 @@ class McapRecorder(Recorder):
             plan.append((t.markers, messages.MARKER_ARRAY))
         schema_ids: dict[str, int] = {}
         channels: dict[str, int] = {}
+        self.bag = rosbag2.BagInfo()
+        self._records: dict[int, rosbag2.TopicRecord] = {}
         for topic, type_name in plan:
             if type_name not in schema_ids:
                 schema_ids[type_name] = self._writer.register_schema(
                     type_name, SchemaEncoding.ROS2, msgdefs.definition(type_name).encode()
                 )
-            channels[topic] = self._writer.register_channel(
-                topic, MessageEncoding.CDR, schema_ids[type_name]
+            qos = rosbag2.EVENTS_QOS if topic == t.events else rosbag2.DEFAULT_QOS
+            record = rosbag2.TopicRecord(
+                topic, type_name, rosbag2.qos_yaml([qos]), msgdefs.type_hash(type_name)
             )
+            channels[topic] = self._writer.register_channel(
+                topic,
+                MessageEncoding.CDR,
+                schema_ids[type_name],
+                {"offered_qos_profiles": record.qos, "topic_type_hash": record.type_hash},
+            )
+            self.bag.topics.append(record)
+            self._records[channels[topic]] = record
         return channels
 
     # ------------------------------------------------------------------ writing
     def _put(self, channel: int, data: bytes, ns: int) -> None:
         self._writer.add_message(channel, ns, data, ns, self.samples & 0xFFFFFFFF)
+        self.bag.note(self._records[channel], ns)
         self.message_count += 1
 
     def _add(self, topic: str, type_name: str, message: dict, ns: int) -> None:
@@ -285,9 +309,23 @@ class McapRecorder(Recorder):
         self._chunk_wall = time.monotonic()
 
     # ------------------------------------------------------------------ closing
+    def bag_metadata(self, file_name: str | None = None) -> dict:
+        """The bag's ``metadata.yaml`` document (:mod:`vjm_ros.logs.rosbag2`) so far.
+
+        Parameters
+        ----------
+        file_name : str, optional
+            Name of the ``.mcap`` file in the bag directory (this file's name by default).
+        """
+        return self.bag.metadata(file_name or self.path.name)
+
     def _finalize(self) -> None:
-        """Write the summary (Statistics, indexes) and close the file."""
+        """Write the bag's metadata, the summary (Statistics, indexes) and close the file."""
         try:
+            self._writer.add_metadata(
+                BAG_METADATA,
+                {"serialized_metadata": rosbag2.metadata_yaml(self.bag_metadata())},
+            )
             self._writer.finish()
             self.flushed_count = self.message_count
         finally:

@@ -55,42 +55,62 @@ def ros_name(name: str) -> str:
 
 @dataclass(frozen=True)
 class Topics:
-    """Topic names of one node.
+    """Topic names of one node, as ROS 2 resolves them.
+
+    ``joint_states`` is relative (``<namespace>/joint_states``), ``/clock`` and ``/diagnostics``
+    are absolute by convention, the node's own topics are private
+    (``<namespace>/<node>/...``).
 
     Parameters
     ----------
     node : str
-        Node name; the private topics are ``/<node>/...``.
+        Node name.
+    namespace : str
+        Node namespace, ``""`` or ``"/"`` for the root, else ``"/a"`` or ``"/a/b"``.
     """
 
     node: str = "vjm_sim_node"
+    namespace: str = ""
 
-    joint_states: str = "/joint_states"
     clock: str = "/clock"
 
     @property
+    def _ns(self) -> str:
+        return self.namespace.rstrip("/")
+
+    @property
+    def joint_states(self) -> str:
+        """``<namespace>/joint_states``."""
+        return f"{self._ns}/joint_states"
+
+    @property
+    def private(self) -> str:
+        """``<namespace>/<node>``, the prefix of the node's own topics."""
+        return f"{self._ns}/{self.node}"
+
+    @property
     def constraint_forces(self) -> str:
-        """``/<node>/constraint_forces``."""
-        return f"/{self.node}/constraint_forces"
+        """``<namespace>/<node>/constraint_forces``."""
+        return f"{self.private}/constraint_forces"
 
     @property
     def energy(self) -> str:
-        """``/<node>/energy``."""
-        return f"/{self.node}/energy"
+        """``<namespace>/<node>/energy``."""
+        return f"{self.private}/energy"
 
     @property
     def markers(self) -> str:
-        """``/<node>/markers``."""
-        return f"/{self.node}/markers"
+        """``<namespace>/<node>/markers``."""
+        return f"{self.private}/markers"
 
     @property
     def events(self) -> str:
-        """``/<node>/events``."""
-        return f"/{self.node}/events"
+        """``<namespace>/<node>/events``."""
+        return f"{self.private}/events"
 
     def wrench(self, closure: str) -> str:
-        """``/<node>/closures/<closure>/wrench``."""
-        return f"/{self.node}/closures/{ros_name(closure)}/wrench"
+        """``<namespace>/<node>/closures/<closure>/wrench``."""
+        return f"{self.private}/closures/{ros_name(closure)}/wrench"
 
 
 # ---------------------------------------------------------------- building blocks

@@ -27,7 +27,8 @@ from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 from vjm_ros.core.constraints import ClosureSet
 from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
 from vjm_ros.core.model import Model
-from vjm_ros.logs.mcap_recorder import SCENE_ATTACHMENT, SETTINGS_METADATA
+from vjm_ros.logs import rosbag2
+from vjm_ros.logs.mcap_recorder import BAG_METADATA, SCENE_ATTACHMENT, SETTINGS_METADATA
 from vjm_ros.logs.messages import ENERGY_LABELS, Topics
 from vjm_ros.scene.loader import parse_scene
 from vjm_ros.sim.simulator import Sample
@@ -302,11 +303,13 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
     if not info.scene_text:
         raise ValueError(f"{mcap_path}: no {SCENE_ATTACHMENT} attachment; cannot rebuild the model")
     model = parse_scene(info.scene_text, source=f"{mcap_path}:{SCENE_ATTACHMENT}").model
-    joint_topic = Topics().joint_states
+    joint_topic = Topics(namespace=str(info.settings.get("namespace", ""))).joint_states
     poser = _Poser(model)
     no_force = np.full((len(model.closures), 3), np.nan)
     no_energy = np.full(len(ENERGY_LABELS), np.nan)
-    settings = {k: v for k, v in info.settings.items() if k not in ("scene", "node", "time")}
+    settings = {
+        k: v for k, v in info.settings.items() if k not in ("scene", "node", "namespace", "time")
+    }
     settings["replayed_from"] = str(mcap_path)
     counts: dict[str, int] = {}
     events: list[tuple[int, str]] = []
@@ -342,7 +345,8 @@ def recover(in_path: str | Path, out_path: str | Path) -> int:
 
     Header, schemas, channels, attachments, metadata and every message of every complete chunk
     are copied; the first record that cannot be read ends the copy. The output has a summary,
-    indexes and a Statistics record, so seeking readers (``ros2 bag``, Foxglove) accept it.
+    chunk and message indexes, a Statistics record and a ``rosbag2`` metadata record counting the
+    messages saved, so seeking readers (``ros2 bag``, rosbags, Foxglove) accept it.
 
     Parameters
     ----------
@@ -364,7 +368,10 @@ def recover(in_path: str | Path, out_path: str | Path) -> int:
     if Path(in_path).resolve() == Path(out_path).resolve():
         raise ValueError("recover: the output must be a different file than the input")
     schemas: dict[int, int] = {0: 0}
+    schema_names: dict[int, str] = {}
     channels: dict[int, int] = {}
+    topics: dict[int, rosbag2.TopicRecord] = {}
+    bag = rosbag2.BagInfo()
     count = 0
     source = iter_records(in_path)
     first = next(source, None)
@@ -380,19 +387,30 @@ def recover(in_path: str | Path, out_path: str | Path) -> int:
                 channel = channels.get(r.channel_id)
                 if channel is not None:
                     writer.add_message(channel, r.log_time, r.data, r.publish_time, r.sequence)
+                    bag.note(topics[channel], r.log_time)
                     count += 1
             elif isinstance(r, Schema) and r.id not in schemas:
                 schemas[r.id] = writer.register_schema(r.name, r.encoding, r.data)
+                schema_names[r.id] = r.name
             elif isinstance(r, Channel) and r.id not in channels:
                 schema = schemas.get(r.schema_id, 0)
                 channels[r.id] = writer.register_channel(
                     r.topic, r.message_encoding, schema, r.metadata
                 )
+                topics[channels[r.id]] = rosbag2.TopicRecord(
+                    r.topic,
+                    schema_names.get(r.schema_id, ""),
+                    r.metadata.get("offered_qos_profiles", ""),
+                    r.metadata.get("topic_type_hash", ""),
+                )
+                bag.topics.append(topics[channels[r.id]])
             elif isinstance(r, Attachment):
                 writer.add_attachment(r.create_time, r.log_time, r.name, r.media_type, r.data)
-            elif isinstance(r, Metadata):
+            elif isinstance(r, Metadata) and r.name != BAG_METADATA:  # recounted below
                 writer.add_metadata(r.name, r.metadata)
             elif isinstance(r, DataEnd):
                 break
+        document = bag.metadata(Path(out_path).name)
+        writer.add_metadata(BAG_METADATA, {"serialized_metadata": rosbag2.metadata_yaml(document)})
         writer.finish()
     return count

@@ -38,6 +38,7 @@ from typing import Protocol
 
 import numpy as np
 
+from vjm_ros.logs import Timebase
 from vjm_ros.logs.storage import LogWriters
 from vjm_ros.realtime.commands import CommandBuffer
 from vjm_ros.realtime.gate import Gate
@@ -76,11 +77,11 @@ class Outputs(Protocol):
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Joint positions, rates and applied efforts at simulated time ``t`` (s), shape (n,)."""
 
-    def dynamics(self, sample: Sample) -> None:
-        """Constraint forces and energy of a sample."""
+    def dynamics(self, sample: Sample, t: float) -> None:
+        """Constraint forces and energy of a sample, stamped ``t`` (s)."""
 
-    def markers(self, sample: Sample) -> None:
-        """A drawing of the mechanism (decimated)."""
+    def markers(self, sample: Sample, t: float) -> None:
+        """A drawing of the mechanism (decimated), stamped ``t`` (s)."""
 
     def diagnostics(self, report: dict, paused: bool) -> None:
         """Periodic health figures (:meth:`~.monitor.Monitor.report`)."""
@@ -197,6 +198,7 @@ class TickLoop:
         self._realtime = self.options.realtime
         self._holding = False
         self.gate = Gate(clock)
+        self.timebase = Timebase(simulator.dt)
         """When ROS callbacks may run: closed from just before a realtime tick's deadline until
         its outputs are out (:class:`~.gate.Gate`)."""
         self._gate_opened = -math.inf
@@ -236,7 +238,7 @@ class TickLoop:
                 self._cv.wait_for(lambda: not self._in_tick, PAUSE_WAIT)
         if changed:
             self.outputs.notice("paused" if paused else "resumed",
-                                f"{'paused' if paused else 'resumed'} at t = {self.sim.t:.6g} s")
+                                f"{'paused' if paused else 'resumed'} at t = {self.time:.6g} s")
 
     def step(self, timeout: float = 2.0) -> float | None:
         """Run one tick while paused and wait for it.
@@ -253,7 +255,7 @@ class TickLoop:
             ticket = self._steps_asked
             self._cv.notify_all()
             done = self._cv.wait_for(lambda: self._steps_done >= ticket, timeout)
-            return self.sim.t if done else None
+            return self.time if done else None
 
     def reset(self, timeout: float = 2.0) -> bool:
         """Return to the initial state (with new settings if some are waiting) and wait for it.
@@ -268,6 +270,19 @@ class TickLoop:
             ticket = self._resets_asked
             self._cv.notify_all()
             return self._cv.wait_for(lambda: self._resets_done >= ticket, timeout)
+
+    @property
+    def time(self) -> float:
+        """Simulated time as published, s: it only ever increases, also across resets.
+
+        The simulator's own clock restarts at 0 on a reset; what the loop publishes (``/clock``,
+        stamps, logs) goes on from one tick after the last time published
+        (:class:`~vjm_ros.logs.Timebase`, the recorders' rule).
+        """
+        return self._published(self.sim.t)
+
+    def _published(self, t: float) -> float:
+        return self.timebase.to_ns(t) * 1e-9
 
     def replace_on_reset(self, simulator: Simulator, commands: CommandBuffer) -> None:
         """Use ``simulator`` and ``commands`` from the next reset on."""
@@ -328,10 +343,10 @@ class TickLoop:
         if self.commands.wait_fresh(HOLD_REPUBLISH):
             self._holding = False
             self.pacer.restart()
-            self.outputs.notice("started", f"first command: running from t = {self.sim.t:.6g} s")
+            self.outputs.notice("started", f"first command: running from t = {self.time:.6g} s")
             return
         sim = self.sim
-        self.outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+        self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
         self._periodic()
 
     def _duration_reached(self) -> bool:
@@ -396,10 +411,11 @@ class TickLoop:
         if latched.fresh or latched.timed_out:
             sim.set_efforts(latched.efforts)
         sim.advance()
+        t = self.time
         if opts.publish_clock:
-            outputs.clock(sim.t)
+            outputs.clock(t)
         if sim.ticks % opts.publish_every == 0:
-            outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+            outputs.joints(t, sim.q, sim.qd, sim.tau)
         forces = sim.ticks % opts.forces_every == 0
         now = self._clock()
         draw = opts.marker_period > 0 and now >= self._next_markers
@@ -409,23 +425,24 @@ class TickLoop:
                 self._next_sigma = sim.t + SIGMA_PERIOD - 1e-12
             sample = sim.sample(singular_values=sigma, geometry=draw or bool(self.recorders))
             if forces:
-                outputs.dynamics(sample)
+                outputs.dynamics(sample, t)
                 self.monitor.observe(sample)
             self.logs.write(sample)
             if draw:
-                outputs.markers(sample)
+                outputs.markers(sample, t)
                 self._next_markers = now + opts.marker_period
 
     def _emit(self, sample: Sample) -> None:
         """Outputs of a state that starts an episode (t = 0)."""
+        t = self._published(sample.t)
         if self.options.publish_clock:
-            self.outputs.clock(sample.t)
-        self.outputs.joints(sample.t, sample.q, sample.qd, sample.effort)
-        self.outputs.dynamics(sample)
+            self.outputs.clock(t)
+        self.outputs.joints(t, sample.q, sample.qd, sample.effort)
+        self.outputs.dynamics(sample, t)
         self.monitor.observe(sample)
         self.logs.write(sample)
         if self.options.marker_period > 0:
-            self.outputs.markers(sample)
+            self.outputs.markers(sample, t)
 
     def _periodic(self) -> None:
         now = self._clock()
@@ -442,7 +459,7 @@ class TickLoop:
             "command_timeouts": self.commands.timeouts,
             "lockstep_timeouts": self.lockstep_timeouts,
         }
-        return self.monitor.report(self.sim.t, self.pacer.stats, counters)
+        return self.monitor.report(self.time, self.pacer.stats, counters)
 
     def _idle(self) -> None:
         """Paused: serve steps, keep diagnostics going, otherwise wait."""
@@ -456,13 +473,13 @@ class TickLoop:
             with self._cv:
                 self._steps_done += 1
                 self._cv.notify_all()
-            self.outputs.notice("stepped", f"stepped to t = {self.sim.t:.6g} s")
+            self.outputs.notice("stepped", f"stepped to t = {self.time:.6g} s")
         self._periodic()
         if not self._paused:
             self.pacer.restart()
             if self.options.lockstep:  # give the controller a state to answer
                 sim = self.sim
-                self.outputs.joints(sim.t, sim.q, sim.qd, sim.tau)
+                self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
 
     def _interrupted_while_paused(self) -> bool:
         return self._stop or not self._paused or self._resets_asked > self._resets_done
@@ -471,6 +488,7 @@ class TickLoop:
         if self._resets_asked == self._resets_done:
             return
         t_before = self.sim.t
+        ended = self.time
         with self._cv:
             replacement, self._replacement = self._replacement, None
         if replacement is not None:
@@ -481,10 +499,16 @@ class TickLoop:
             self.sim.reset()
         self.commands.clear()
         self.logs.note_reset(t_before)
-        self.monitor.reset(0.0)
+        self.timebase.tick_ns = int(round(self.sim.dt * 1e9))
+        start = self.timebase.reset(t_before) * 1e-9
+        self.monitor.reset(start)
         self._next_sigma = 0.0
         self.pacer.restart()
-        self.outputs.notice("reset", f"reset at t = {t_before:.6g} s to the initial state")
+        self.outputs.notice(
+            "reset",
+            f"reset to the initial state after t = {ended:.6g} s; simulated time goes on from "
+            f"t = {start:.6g} s",
+        )
         self._emit(self.sim.sample(singular_values=True))
         self._holding = self.options.wait_for_command
         with self._cv:

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from vjm_ros.core.errors import ConfigurationError, StiffnessError
 from vjm_ros.core.integrators import INTEGRATORS
+from vjm_ros.scene.description import with_initial_positions
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.settings import SimulationSettings, resolve_settings
 from vjm_ros.sim.simulator import Simulator
@@ -232,8 +233,18 @@ def simulation_settings(config: NodeConfig, scene: Scene) -> SimulationSettings:
     )
 
 
-def build_simulator(config: NodeConfig) -> tuple[Scene, Simulator]:
+def build_simulator(
+    config: NodeConfig, initial_positions: dict[str, float] | None = None
+) -> tuple[Scene, Simulator]:
     """Load the scene and build its simulator; refuse settings that cannot run.
+
+    Parameters
+    ----------
+    config : NodeConfig
+    initial_positions : dict, optional
+        Joint name to initial value (rad or m): these joints start there and the others are
+        assembled so that the closures hold (:func:`~vjm_ros.scene.description.
+        with_initial_positions`).
 
     Raises
     ------
@@ -241,9 +252,12 @@ def build_simulator(config: NodeConfig) -> tuple[Scene, Simulator]:
         The scene cannot be loaded.
     ConfigurationError
         A setting is out of range, the penalty gains are too stiff for the integrator and step
-        (:class:`~vjm_ros.core.errors.StiffnessError`), or ``publish_rate_hz`` exceeds the tick rate.
+        (:class:`~vjm_ros.core.errors.StiffnessError`), ``publish_rate_hz`` exceeds the tick
+        rate, or the initial positions name an unknown joint or cannot close the mechanism.
     """
     scene = load_scene(config.scene)
+    if initial_positions:
+        scene = replace(scene, model=with_initial_positions(scene.model, initial_positions))
     settings = simulation_settings(config, scene)
     try:
         sim = Simulator(scene.model, settings, scene.gains)

@@ -48,7 +48,7 @@ import rclpy.exceptions
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from vjm_ros.core.compiled import make_mechanism
 from vjm_ros.core.constraints import ExactClosure
@@ -305,14 +305,18 @@ def tip_position(model: Model, q: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 class PdControllerNode(Node):
-    """Subscribes ``/joint_states``, publishes ``/<simulator>/effort_commands``.
+    """Subscribes ``joint_states``, publishes ``<simulator>/effort_commands``.
+
+    Topic names are relative, so a namespace (``-r __ns:=/robot1``) or a remap places the
+    controller beside its simulator.
 
     Parameters (ROS): ``scene`` (the scene the simulator runs, for the model), ``simulator`` (the
     simulator node's name), ``center_x``, ``center_y``, ``radius`` (m), ``period``,
     ``approach_time`` (s), ``kp`` (N m/rad), ``kd`` (N m s/rad).
 
     The motion starts at the first joint state received (its stamp is time zero) and starts over
-    when the simulator's time goes back (a ``~/reset``).
+    at the first state after the simulator announces a reset on ``<simulator>/events`` (its
+    simulated time goes on across a reset).
     """
 
     def __init__(self, *, context=None, parameter_overrides=None):
@@ -335,11 +339,13 @@ class PdControllerNode(Node):
         self.law: PdGravityLaw | None = None
         self.t0 = 0.0
         self.last_t = -math.inf
-        topic = f"/{p['simulator']}/effort_commands"
+        self.restart = False
+        topic = f"{p['simulator']}/effort_commands"
         self.publisher = self.create_publisher(Float64MultiArray, topic, 10)
         # Depth 1: when a state arrives before the previous one was handled, only the newest
         # counts (a controller that falls behind skips states instead of acting on old ones).
-        self.create_subscription(JointState, "/joint_states", self.on_joint_state, 1)
+        self.create_subscription(JointState, "joint_states", self.on_joint_state, 1)
+        self.create_subscription(String, f"{p['simulator']}/events", self.on_event, 10)
         self.get_logger().info(
             f"tracking a circle of radius {p['radius']} m around ({p['center_x']}, "
             f"{p['center_y']}) m every {p['period']} s; commands on {topic}")
@@ -351,7 +357,8 @@ class PdControllerNode(Node):
             q, qd, _ = joint_arrays(msg, self.model.joint_names)
         except KeyError:
             return  # joint states of another robot
-        if self.law is None or t < self.last_t:  # first state, or the simulator was reset
+        if self.law is None or self.restart or t < self.last_t:  # first state, or after a reset
+            self.restart = False
             p = self.params
             self.law = make_law(self.model, q, (p["center_x"], p["center_y"]), p["radius"],
                                 p["period"], p["approach_time"], p["kp"], p["kd"])
@@ -359,6 +366,12 @@ class PdControllerNode(Node):
         self.last_t = t
         tau = self.law.efforts(t - self.t0, q, qd)
         self.publisher.publish(Float64MultiArray(data=tau.tolist()))
+
+
+    def on_event(self, msg: String) -> None:
+        """Start the motion over at the next state after the simulator's reset."""
+        if msg.data.startswith("reset:"):
+            self.restart = True
 
 
 def main(args: list[str] | None = None) -> int:

@@ -206,7 +206,10 @@ class TipTrace:
 
 
 def markers(
-    sample: Sample, trace: Iterable[np.ndarray] = (), force_scale: float = layouts.FORCE_SCALE
+    sample: Sample,
+    t: float,
+    trace: Iterable[np.ndarray] = (),
+    force_scale: float = layouts.FORCE_SCALE,
 ) -> MarkerArray:
     """``visualization_msgs/MarkerArray`` of the mechanism, frame ``world``.
 
@@ -219,12 +222,14 @@ def markers(
     sample : Sample
         ``segments`` (n, 2, 2), ``points`` (n_points, 2), ``closure_points`` (k, 2),
         ``closure_force`` (k, 3).
+    t : float
+        Stamp, simulated s.
     trace : iterable of ndarray, shape (m, 2)
         Recent tip positions, m.
     force_scale : float
         Arrow length per newton, m/N.
     """
-    when = stamp(sample.t)
+    when = stamp(t)
     specs = layouts.marker_specs(sample, force_scale, trace=list(trace))
     return MarkerArray(markers=[_marker(when, *spec) for spec in specs])
 

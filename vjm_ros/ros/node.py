@@ -48,6 +48,7 @@ Exit codes:
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 import traceback
@@ -67,6 +68,7 @@ from rcl_interfaces.msg import (
 )
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -91,7 +93,8 @@ from vjm_ros.realtime.parameters import (
 )
 from vjm_ros.ros import conversions as conv
 from vjm_ros.ros.runtime import Spinner, StopOnSignals, raise_priority
-from vjm_ros.scene.loader import Scene
+from vjm_ros.scene.description import assembled_scene_yaml
+from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.simulator import Sample, Simulator
 
 NODE_NAME = "vjm_sim_node"
@@ -142,7 +145,9 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     return d
 
 
-def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: str) -> list:
+def open_recorders(
+    config: NodeConfig, scene: Scene, sim: Simulator, node_name: str, namespace: str = ""
+) -> list:
     """The MCAP and rerun recorders asked for by ``mcap`` and ``rrd``
     (:func:`~vjm_ros.logs.opening.open_recorders`, with the node's settings in the logs).
 
@@ -151,8 +156,8 @@ def open_recorders(config: NodeConfig, scene: Scene, sim: Simulator, node_name: 
     ConfigurationError
         A recorder is not available or its file cannot be opened.
     """
-    settings = {**sim.describe(), "node": node_name, "realtime": config.realtime,
-                "lockstep": config.lockstep}
+    settings = {**sim.describe(), "node": node_name, "namespace": namespace,
+                "realtime": config.realtime, "lockstep": config.lockstep}
     return open_log_recorders(scene.model, settings, scene.text, mcap=config.mcap,
                               rrd=config.rrd, duration=config.duration, rate=sim.settings.rate)
 
@@ -183,15 +188,18 @@ class SimNode(Node):
         self.config = NodeConfig.from_values(
             {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
         )
-        self.scene, sim = build_simulator(self.config)
+        positions = self._declare_initial_positions(load_scene(self.config.scene).model)
+        self.scene, sim = build_simulator(self.config, positions)
         self._pending_scene: Scene | None = None
-        recorders = open_recorders(self.config, self.scene, sim, self.get_name())
+        recorders = open_recorders(self.config, self.scene, sim, self.get_name(),
+                                   self.get_namespace())
         self._throttle = Throttle(WARNING_PERIOD)
         self._make_publishers()
         self._wrench_pubs: dict[str, object] = {}
         self._adopt(sim.model)
         self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
                              recorders, paused=self.config.start_paused)
+        self._publish_scene()
         self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts, 10)
         self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands, 10)
         self.create_service(SetBool, "~/pause", self._on_pause)
@@ -207,14 +215,41 @@ class SimNode(Node):
         )
 
     # ------------------------------------------------------------------ set-up
+    def _declare_initial_positions(self, model) -> dict[str, float]:
+        """Declare ``initial_positions.<joint>`` for every joint; the values given (not NaN).
+
+        A given joint starts at its value (rad or m) and the others are assembled so that the
+        closures hold; read-only after start.
+        """
+        given = {}
+        for name in model.joint_names:
+            descriptor_ = ParameterDescriptor(
+                name=f"initial_positions.{name}",
+                description=f"initial value of joint {name} (rad or m); NaN: the scene's",
+                read_only=True,
+                dynamic_typing=True,
+            )
+            value = self.declare_parameter(f"initial_positions.{name}", math.nan, descriptor_).value
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ConfigurationError(
+                    f"initial_positions.{name}: expected a number, found {value!r}") from None
+            if not math.isnan(value):
+                given[name] = value
+        return given
+
     def _make_publishers(self) -> None:
-        self._joint_pub = self.create_publisher(JointState, "/joint_states", 10)
+        self._joint_pub = self.create_publisher(JointState, "joint_states", 10)
         self._forces_pub = self.create_publisher(Float64MultiArray, "~/constraint_forces", 10)
         self._energy_pub = self.create_publisher(Float64MultiArray, "~/energy", 10)
         self._clock_pub = self.create_publisher(Clock, "/clock", 10)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._events_pub = self.create_publisher(String, "~/events", 100)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._scene_pub = self.create_publisher(String, "~/scene_description", latched)
         self._energy_layout = conv.labelled_layout(conv.ENERGY_LABELS, 1)
 
     def _commands_for(self, sim: Simulator) -> CommandBuffer:
@@ -256,8 +291,13 @@ class SimNode(Node):
         """Adopt the simulator built with settings changed since the last reset."""
         if self._pending_scene is not None:
             self.scene, self._pending_scene = self._pending_scene, None
+            self._publish_scene()
         self._adopt(simulator.model)
         self.loop.options = self._options(simulator)
+
+    def _publish_scene(self) -> None:
+        """``~/scene_description``: the scene YAML with its assembled initial state (latched)."""
+        self._scene_pub.publish(String(data=assembled_scene_yaml(self.scene)))
 
     def clock(self, t: float) -> None:
         """Publish ``/clock``."""
@@ -267,18 +307,18 @@ class SimNode(Node):
         """Publish ``/joint_states``."""
         self._joint_pub.publish(conv.joint_state(self._joint_names, t, q, qd, effort))
 
-    def dynamics(self, sample: Sample) -> None:
-        """Publish the constraint forces, wrenches and energy of a sample."""
+    def dynamics(self, sample: Sample, t: float) -> None:
+        """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
         forces = sample.closure_force
         self._forces_pub.publish(conv.constraint_forces(self._forces_layout, forces))
         for pub, force in zip(self._wrench_list, forces, strict=True):
-            pub.publish(conv.wrench(force, sample.t))
+            pub.publish(conv.wrench(force, t))
         self._energy_pub.publish(conv.energy(self._energy_layout, sample.energy))
 
-    def markers(self, sample: Sample) -> None:
-        """Publish ``~/markers`` (the tip trace gains the sample's tips)."""
+    def markers(self, sample: Sample, t: float) -> None:
+        """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
         self._trace.add(sample)
-        self._markers_pub.publish(conv.markers(sample, self._trace.strips()))
+        self._markers_pub.publish(conv.markers(sample, t, self._trace.strips()))
 
     def diagnostics(self, report: dict, paused: bool, level: int | None = None,
                     message: str | None = None) -> None:
@@ -322,7 +362,7 @@ class SimNode(Node):
         self.loop.pause(request.data)
         response.success = True
         state = "paused" if request.data else "running"
-        response.message = f"{state} at t = {self.loop.sim.t:.6g} s"
+        response.message = f"{state} at t = {self.loop.time:.6g} s"
         return response
 
     def _on_step(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -338,8 +378,9 @@ class SimNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         done = self.loop.reset()
         response.success = done
-        response.message = (f"reset to the initial state of {self.scene.name} (t = 0)" if done
-                            else "the tick loop is not running")
+        response.message = (
+            f"reset to the initial state of {self.scene.name}; simulated time goes on from "
+            f"t = {self.loop.time:.6g} s" if done else "the tick loop is not running")
         return response
 
     def _on_set_parameters(self, params) -> SetParametersResult:

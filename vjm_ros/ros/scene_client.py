@@ -1,0 +1,58 @@
+"""For controllers and tools: the simulated scene, from the simulator node itself.
+
+The node publishes its scene (YAML, with the assembled initial state) on
+``<namespace>/<node>/scene_description`` with transient-local durability, so a node that starts
+later still receives it, as with robot_state_publisher's ``robot_description``::
+
+    text = wait_for_scene_description(node)          # before spinning the node elsewhere
+    scene = parse_scene(text, source="scene_description")
+    model = scene.model                               # what the simulator runs
+"""
+
+from __future__ import annotations
+
+import time
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+SCENE_DESCRIPTION_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+"""The QoS the simulator publishes its scene description with (a late joiner gets the last one)."""
+
+
+def scene_description_topic(simulator: str = "vjm_sim_node") -> str:
+    """The description topic of a simulator node, relative to the caller's namespace."""
+    return f"{simulator}/scene_description"
+
+
+def wait_for_scene_description(
+    node: Node, simulator: str = "vjm_sim_node", timeout: float = 10.0
+) -> str | None:
+    """The scene YAML the simulator publishes, or None if none arrived within ``timeout``.
+
+    Spins ``node`` (call it before the node is added to an executor that spins elsewhere).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    simulator : str
+        Name of the simulator node (in the caller's namespace).
+    timeout : float
+        Longest wait, wall s.
+    """
+    received: list[str] = []
+    sub = node.create_subscription(
+        String, scene_description_topic(simulator), lambda m: received.append(m.data),
+        SCENE_DESCRIPTION_QOS,
+    )
+    try:
+        deadline = time.monotonic() + timeout
+        while not received and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+    finally:
+        node.destroy_subscription(sub)
+    return received[-1] if received else None
