@@ -222,6 +222,13 @@ class SimNode(Node):
         closures hold; read-only after start.
         """
         given = {}
+        overrides = getattr(self, "_parameter_overrides", None) or {}
+        for key in overrides:
+            if key.startswith("initial_positions.") and key[18:] not in model.joint_names:
+                raise ConfigurationError(
+                    f"{key}: expected a joint of {model.name} ({', '.join(model.joint_names)}), "
+                    f"found {key[18:]!r}"
+                )
         for name in model.joint_names:
             descriptor_ = ParameterDescriptor(
                 name=f"initial_positions.{name}",

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 
-import rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
@@ -49,10 +49,14 @@ def wait_for_scene_description(
         String, scene_description_topic(simulator), lambda m: received.append(m.data),
         SCENE_DESCRIPTION_QOS,
     )
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
     try:
         deadline = time.monotonic() + timeout
         while not received and time.monotonic() < deadline:
-            rclpy.spin_once(node, timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+            executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
     finally:
+        executor.remove_node(node)
+        executor.shutdown()
         node.destroy_subscription(sub)
     return received[-1] if received else None
