@@ -1,20 +1,28 @@
-"""Launch the vjm_ros simulator with the example controller.
+"""Launch the vjm_ros simulator, optionally with the example controller.
 
-    ros2 launch vjm_ros sim.launch.py                       # five_bar, realtime, circle tracking
-    ros2 launch vjm_ros sim.launch.py lockstep:=true        # every tick waits for the controller
-    ros2 launch vjm_ros sim.launch.py scene:=four_bar controller:=false
+    ros2 launch vjm_ros sim.launch.py                                    # four_bar (the node's default)
+    ros2 launch vjm_ros sim.launch.py scene:=five_bar controller:=true   # five_bar, circle tracking
+    ros2 launch vjm_ros sim.launch.py scene:=five_bar controller:=true lockstep:=true
+    ros2 launch vjm_ros sim.launch.py namespace:=robot1                  # topics under /robot1
 
-The simulator reads config/sim_node.yaml; ``scene``, ``rate_hz`` and ``lockstep`` override it.
-Discovery stays on this host unless ``discovery_range`` says otherwise. The ``launch`` packages
-are imported only here (they are not needed to run the nodes).
+The simulator reads config/sim_node.yaml; ``scene``, ``rate_hz`` and ``lockstep`` override it. The
+controller runs on simulated time (``use_sim_time``, default true: it follows the simulator's
+``/clock``). Uses only launch features of Humble, Jazzy and Kilted. Keep DDS discovery on the host
+by exporting ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy and later) or
+``ROS_LOCALHOST_ONLY=1`` (Humble) before launching. The ``launch`` packages are imported only here
+(they are not needed to run the nodes).
 """
 
 import os
 
+DEFAULT_SCENE = "four_bar"
+"""The node's own default scene (parameter ``scene``), so that a launch without arguments runs
+what ``ros2 run vjm_ros vjm_sim_node`` runs."""
+
 
 def generate_launch_description():
     from ament_index_python.packages import get_package_share_directory
-    from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
+    from launch.actions import DeclareLaunchArgument
     from launch.conditions import IfCondition
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import Node
@@ -24,21 +32,24 @@ def generate_launch_description():
 
     config = os.path.join(get_package_share_directory("vjm_ros"), "config", "sim_node.yaml")
     scene = LaunchConfiguration("scene")
+    namespace = LaunchConfiguration("namespace")
     return LaunchDescription([
-        DeclareLaunchArgument("scene", default_value="five_bar",
+        DeclareLaunchArgument("scene", default_value=DEFAULT_SCENE,
                               description="Scene of the simulator (the controller needs five_bar)."),
+        DeclareLaunchArgument("namespace", default_value="",
+                              description="Namespace of both nodes (joint_states goes under it)."),
         DeclareLaunchArgument("rate_hz", default_value="1000.0", description="Tick rate, Hz."),
         DeclareLaunchArgument("lockstep", default_value="false",
                               description="Each tick waits for the controller's command."),
-        DeclareLaunchArgument("controller", default_value="true",
-                              description="Start the example PD controller."),
-        DeclareLaunchArgument("discovery_range", default_value="LOCALHOST",
-                              description="ROS_AUTOMATIC_DISCOVERY_RANGE of both nodes."),
-        SetEnvironmentVariable("ROS_AUTOMATIC_DISCOVERY_RANGE", LaunchConfiguration("discovery_range")),
+        DeclareLaunchArgument("controller", default_value="false",
+                              description="Start the example PD controller (scene five_bar)."),
+        DeclareLaunchArgument("use_sim_time", default_value="true",
+                              description="The controller follows the simulator's /clock."),
         Node(
             package="vjm_ros",
             executable="vjm_sim_node",
             name="vjm_sim_node",
+            namespace=namespace,
             output="screen",
             parameters=[
                 config,
@@ -56,8 +67,14 @@ def generate_launch_description():
             package="vjm_ros",
             executable="vjm_pd_controller",
             name="vjm_pd_controller",
+            namespace=namespace,
             output="screen",
-            parameters=[{"scene": scene, "simulator": "vjm_sim_node"}],
+            parameters=[{
+                "scene": scene,
+                "simulator": "vjm_sim_node",
+                "use_sim_time": ParameterValue(LaunchConfiguration("use_sim_time"),
+                                               value_type=bool),
+            }],
             condition=IfCondition(LaunchConfiguration("controller")),
         ),
     ])

@@ -73,3 +73,62 @@ def test_per_tick_encoding_cost(benchmark, run, path, kind):
         benchmark(fast, *args)
     else:
         benchmark(cdr.encode, *slow)
+
+
+def mcap_recording_memory(seconds: float, path, scene_name: str = "five_bar") -> dict:
+    """Record ``seconds`` of a scene at 1 kHz into an MCAP file; resident memory as it grows.
+
+    Returns the RSS (MB) sampled every simulated minute, the peak RSS, the messages written and
+    the file's size.
+    """
+    import resource
+
+    from vjm_ros.logs.mcap_recorder import McapRecorder
+    from vjm_ros.scene import load_scene
+    from vjm_ros.sim.simulator import SimulationSettings, Simulator
+
+    def rss_mb():
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+        return float("nan")
+
+    scene = load_scene(scene_name)
+    sim = Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains)
+    ticks_per_minute = int(60 * sim.settings.rate)
+    series = []
+    with McapRecorder(path, scene.model, sim.describe(), scene.text) as rec:
+        rec.write(sim.sample())
+        for k in range(int(seconds * sim.settings.rate)):
+            sim.advance()
+            rec.write(sim.sample())
+            if (k + 1) % ticks_per_minute == 0:
+                series.append(rss_mb())
+        count = rec.message_count
+    return {
+        "seconds": seconds,
+        "rss_mb_per_minute": series,
+        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "messages": count,
+        "file_mb": path.stat().st_size / 2**20,
+    }
+
+
+def test_mcap_recording_memory_stays_bounded(tmp_path):
+    """Target: a 1 h recording at 1 kHz grows the process by less than 64 MB.
+
+    Runs ``VJM_BENCH_RECORD_SECONDS`` (default 600) simulated seconds and extrapolates the growth
+    after the first minute linearly to an hour (the writer's index grows by one entry per chunk;
+    everything else is bounded).
+    """
+    import os
+
+    seconds = float(os.environ.get("VJM_BENCH_RECORD_SECONDS", "600"))
+    r = mcap_recording_memory(seconds, tmp_path / "hour.mcap")
+    series = r["rss_mb_per_minute"]
+    per_hour = (series[-1] - series[0]) / max(len(series) - 1, 1) * 60 if len(series) > 1 else 0
+    print(f"MCAP recording, {seconds:g} s of five_bar at 1 kHz: RSS per minute {series}, "
+          f"{per_hour:.1f} MB per hour after the first minute, file {r['file_mb']:.0f} MB, "
+          f"{r['messages']} messages")
+    assert per_hour < 64.0

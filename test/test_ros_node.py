@@ -486,8 +486,29 @@ def test_config_file_lists_every_parameter_with_a_valid_value():
     NodeConfig.from_values(values)
 
 
-def test_launch_file_compiles():
-    compile((ROOT / "launch" / "sim.launch.py").read_text(), "sim.launch.py", "exec")
+def test_launch_file_compiles_and_agrees_with_the_node():
+    """The launch file's default scene is the node's (and the config file's), and it declares the
+    arguments users rely on, using only DeclareLaunchArgument (no distro-specific actions)."""
+    import ast
+
+    import yaml
+
+    from vjm_ros.realtime.parameters import PARAMETERS
+
+    source = (ROOT / "launch" / "sim.launch.py").read_text()
+    namespace = {}
+    exec(compile(source, "sim.launch.py", "exec"), namespace)  # defines; launch is not imported
+    default = next(p.default for p in PARAMETERS if p.name == "scene")
+    assert namespace["DEFAULT_SCENE"] == default
+    config = yaml.safe_load((ROOT / "config" / "sim_node.yaml").read_text())
+    assert config["vjm_sim_node"]["ros__parameters"]["scene"] == default
+    declared = {
+        node.args[0].value
+        for node in ast.walk(ast.parse(source))
+        if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "DeclareLaunchArgument"
+    }
+    assert {"scene", "namespace", "use_sim_time", "controller", "lockstep", "rate_hz"} <= declared
+    assert "SetEnvironmentVariable" not in source
 
 
 def node_process(*params, args=()):
@@ -627,7 +648,7 @@ def test_params_file_loads_and_logs_are_written(tmp_path):
     assert code == 0, out
     assert "tick loop at SCHED_FIFO priority 10" in out or "realtime_priority 10 not granted" in out
     summary = summary_of(out)
-    assert summary["scene"] == "five_bar" and summary["ticks"] == 200
+    assert summary["scene"] == "four_bar" and summary["ticks"] == 200
     assert rrd.stat().st_size > 0
     from mcap.reader import make_reader
 

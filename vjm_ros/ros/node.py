@@ -11,7 +11,7 @@ Parameters: :data:`vjm_ros.realtime.parameters.PARAMETERS` (each declared with i
 ==============================  ========================================  =========================
 topic                           type                                      when
 ==============================  ========================================  =========================
-``/joint_states``               ``sensor_msgs/JointState``                every tick, or
+``joint_states`` (relative)     ``sensor_msgs/JointState``                every tick, or
                                                                           ``publish_rate_hz``
 ``~/constraint_forces``         ``std_msgs/Float64MultiArray``            every tick, or
                                                                           ``forces_rate_hz``
@@ -21,12 +21,14 @@ topic                           type                                      when
 ``~/markers``                   ``visualization_msgs/MarkerArray``        ``marker_rate_hz`` (wall)
 ``/diagnostics``                ``diagnostic_msgs/DiagnosticArray``       1 Hz (wall)
 ``~/events``                    ``std_msgs/String``                       pause, step, reset, timeouts
+``~/scene_description``         ``std_msgs/String`` (transient local)     at start and new scenes
 ``~/effort_commands`` (in)      ``std_msgs/Float64MultiArray``            one value per actuator
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
 ==============================  ========================================  =========================
 
-Message layouts: :mod:`vjm_ros.ros.conversions`. Header stamps are simulated time; the node itself
-runs on the wall clock (it publishes ``/clock`` but does not use it). Services: ``~/pause``
+Message layouts: :mod:`vjm_ros.ros.conversions`. Header stamps are simulated time, which only
+increases (also across ``~/reset``); the node itself runs on the wall clock (it publishes
+``/clock`` but does not use it). Services: ``~/pause``
 (``std_srvs/SetBool``), ``~/step`` (``std_srvs/Trigger``, one tick while paused), ``~/reset``
 (``std_srvs/Trigger``, back to the initial state; settings changed since take effect).
 
