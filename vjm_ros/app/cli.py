@@ -1,6 +1,7 @@
 """Command line interface ``vjm`` (works without ROS).
 
-Subcommands: ``scenes``, ``run``, ``bench``, ``replay``, ``recover``. See docs/design.md section 5.
+Subcommands: ``scenes``, ``run``, ``bench``, ``sweep``, ``tune``, ``replay``, ``recover``. See
+docs/design.md section 5.
 
 Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
 running, a log path that cannot be written or a nearly full disk); 3 the simulation diverged (what
@@ -122,6 +123,10 @@ def _parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="speed/accuracy study", add_help=False)
     b.add_argument("rest", nargs=argparse.REMAINDER)
+    sw = sub.add_parser("sweep", help="a grid of runs from a spec, on Dask", add_help=False)
+    sw.add_argument("rest", nargs=argparse.REMAINDER)
+    tu = sub.add_parser("tune", help="penalty gains for an integrator and step", add_help=False)
+    tu.add_argument("rest", nargs=argparse.REMAINDER)
     rp = sub.add_parser("replay", help="rerun recording from an MCAP log")
     rp.add_argument("mcap", type=Path)
     rp.add_argument("-o", "--output", type=Path, help="output .rrd (default: next to the log)")
@@ -138,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
         from vjm_ros.studies.bench import main as bench_main
 
         return bench_main(argv[1:])
+    if argv[:1] in (["sweep"], ["tune"]):
+        from vjm_ros.studies.sweep import cli as sweep_cli
+
+        return sweep_cli.main(argv[0], argv[1:])
     args = _parser().parse_args(argv)
     try:
         if args.command == "scenes":

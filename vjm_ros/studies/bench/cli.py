@@ -73,6 +73,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="run nothing: write the report, figures and --docs again from a "
                         "results.json (adding the long runs found in --out)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--workers", type=int, default=1,
+                   help="run the rows on this many local Dask workers (the sweep engine; "
+                        "timings then share the machine); default 1: in this process")
+    p.add_argument("--cluster", metavar="ADDRESS",
+                   help="run the rows on an existing Dask scheduler (tcp://host:port)")
     return p
 
 
@@ -133,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
             scenes=names, quick=args.quick, out=args.out, repeats=args.repeats,
             horizon=args.horizon, mujoco=not args.no_mujoco, scaling=not args.no_scaling,
             docs=args.docs, extra=extra, progress=not args.no_progress,
-            command="vjm bench " + " ".join(argv),
+            command="vjm bench " + " ".join(argv), workers=args.workers, cluster=args.cluster,
         )
         results = run_bench(opts)
     except (SceneError, ConfigurationError) as exc:

@@ -327,3 +327,5 @@ class BenchOptions:
     grid: Grid | None = None
     progress: bool = True
     command: str = "vjm bench"
+    workers: int = 1
+    cluster: str | None = None

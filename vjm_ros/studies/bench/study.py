@@ -60,11 +60,11 @@ from vjm_ros.studies.bench.report import (
 from vjm_ros.studies.bench.runs import (
     RowResult,
     _finish_timing,
-    _run_mujoco,
-    _run_vjm,
     _time_mujoco,
     _time_vjm,
     compute_reference,
+    run_mujoco,
+    run_vjm,
 )
 from vjm_ros.studies.bench.scaling import (
     SCALING_METHODS,
@@ -126,6 +126,11 @@ def run_bench(opts: BenchOptions) -> dict:
             kernel = None
     progress = BenchProgress(total, enabled=opts.progress)
     started = time.perf_counter()
+    engine = None
+    if opts.workers > 1 or opts.cluster:
+        from vjm_ros.studies.sweep.engine import Engine  # the sweep engine, on Dask
+
+        engine = Engine(opts.cluster, opts.workers).__enter__()
     results: dict = {
         "meta": {**_meta(opts, threads, mj_version, mj_note, grid), "kernel": kernel},
         "scenes": {},
@@ -141,9 +146,15 @@ def run_bench(opts: BenchOptions) -> dict:
                 ref, ref_info = None, {"error": str(exc)}
             progress.advance(2 * 6000.0 * horizon, f"{sc.name}: reference done")
             out_rows = []
-            for cfg in rows:
-                runner = _run_mujoco if cfg.engine == "mujoco" else _run_vjm
-                res = runner(sc, cfg, horizon, ref)
+            runners = [run_mujoco if cfg.engine == "mujoco" else run_vjm for cfg in rows]
+            if engine is not None:
+                futures = [engine.client.submit(run, sc, cfg, horizon, ref, pure=False)
+                           for run, cfg in zip(runners, rows, strict=True)]
+            for i, cfg in enumerate(rows):
+                if engine is not None:
+                    res = futures[i].result()
+                else:
+                    res = runners[i](sc, cfg, horizon, ref)
                 out_rows.append(res)
                 progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: {cfg.label()}")
             for _ in range(max(opts.repeats - 1, 0)):
@@ -166,6 +177,8 @@ def run_bench(opts: BenchOptions) -> dict:
             results["scaling"] = run_scaling(grid, opts.repeats, progress, opts.extra)
     finally:
         progress.close()
+        if engine is not None:
+            engine.__exit__(None, None, None)
     results["recommended"] = recommend_overall(all_rows) if all_rows else {}
     cpu = sum(sum(r.cpu_samples) for rs in all_rows.values() for r in rs
               if r.ok and len(r.cpu_samples) == len(r.wall_samples))

@@ -1,0 +1,206 @@
+"""``vjm sweep`` and ``vjm tune`` on a real Dask ``LocalCluster`` of two worker processes.
+
+Checks: specs are validated before any run, naming the key; every case becomes one row (failed
+and refused ones with their reason); rows are keyed by their settings and the same spec gives the
+same numbers (timing aside); ``--resume`` runs only what is missing; Ctrl-C leaves a complete
+table and no worker process; tuning picks the gains with the smallest closure error among the
+rows that ran and writes them as a scene snippet that loads.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+import yaml
+
+from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.studies.sweep.engine import RESULTS_CSV, RESULTS_PARQUET, Engine, run_sweep
+from vjm_ros.studies.sweep.run import MEASURES
+from vjm_ros.studies.sweep.spec import SpecError, parse_spec
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = """
+name: small
+scenes: [five_bar, four_bar]
+duration: 0.05
+settings: {closure: penalty}
+grid:
+  integrator: [rk4, semi_implicit_euler]
+  omega_n: [60, 5000]
+  zeta: [1.0]
+"""
+
+
+@pytest.fixture(scope="module")
+def engine():
+    with Engine(workers=2) as eng:
+        yield eng
+
+
+def rows_of(path: Path) -> list[dict]:
+    with (path / RESULTS_CSV).open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize(
+    "text, key, expected",
+    [
+        ("scenes: [four_bar]\ncolour: red\n", "colour", "one of the keys"),
+        ("scenes: []\n", "scenes", "a non-empty list"),
+        ("scenes: [four_bar]\nsettings: {warp: 9}\n", "settings.warp", "one of ["),
+        ("scenes: [four_bar]\ngrid: {rate: []}\n", "grid.rate", "a non-empty list of values"),
+        ("scenes: [four_bar]\ngrid: {speed: [1]}\n", "grid.speed", "a vjm run setting"),
+        ("scenes: [four_bar]\ngrid: {rate: [.nan]}\n", "grid.rate[0]", "a finite number"),
+        ("scenes: [four_bar]\nduration: -1\n", "duration", "a positive number"),
+        ("scenes: [four_bar]\nsettings: {rate: 500}\ngrid: {rate: [1000]}\n", "grid.rate",
+         "not also fixed"),
+    ],
+    ids=["unknown_key", "no_scenes", "unknown_setting", "empty_axis", "unknown_axis", "nan",
+         "negative_duration", "fixed_and_swept"],
+)
+def test_bad_specs_are_refused_naming_the_key(text, key, expected):
+    with pytest.raises(SpecError) as info:
+        parse_spec(text, "bad.yaml")
+    assert info.value.key == key and expected in info.value.expected
+    assert str(info.value).startswith(f"bad.yaml: {key}: expected ")
+
+
+def test_an_unreachable_scheduler_is_refused_before_any_run():
+    with pytest.raises(ConfigurationError, match=r"--cluster tcp://127\.0\.0\.1:9: expected a "
+                                                 r"reachable Dask scheduler"):
+        with Engine("tcp://127.0.0.1:9", timeout=2.0):
+            pass
+
+
+def test_unknown_scene_parameters_are_refused_before_any_run(engine, tmp_path):
+    spec = parse_spec(SPEC.replace("zeta: [1.0]", "mass.knee: [1.0]"), "s.yaml")
+    with pytest.raises(ConfigurationError, match="grid.mass.knee: expected a link of five_bar"):
+        run_sweep(spec, tmp_path, engine, progress=False)
+    assert not (tmp_path / RESULTS_CSV).exists()
+
+
+def test_every_case_is_a_row_and_the_same_spec_gives_the_same_numbers(engine, tmp_path):
+    spec = parse_spec(SPEC, "small.yaml")
+    first = run_sweep(spec, tmp_path / "a", engine, progress=False)
+    run_sweep(spec, tmp_path / "b", engine, progress=False)
+    assert first["rows"] == first["run"] == 8 and not first["interrupted"]
+    a, b = rows_of(tmp_path / "a"), rows_of(tmp_path / "b")
+    assert len({r["key"] for r in a}) == 8  # keyed by scene and settings
+    statuses = {r["status"] for r in a}
+    assert statuses == {"ok", "refused (stiffness)"}  # 5000 rad/s is beyond either method's bound
+    refused = [r for r in a if r["status"] != "ok"]
+    assert all(r["omega_n"] == "5000" and "stability bound" in r["message"] for r in refused)
+    ok = [r for r in a if r["status"] == "ok"]
+    assert all(float(r["position_deviation"]) > 0 for r in ok)  # against the shared reference
+    by_key = {r["key"]: r for r in b}
+    for row in a:  # reproducible: every measure but the timing
+        other = by_key[row["key"]]
+        for m in MEASURES:
+            if m != "wall_time":
+                assert row[m] == other[m], (row["key"], m)
+    table = pq.read_table(tmp_path / "a" / RESULTS_PARQUET)
+    assert table.num_rows == 8 and set(spec.columns + list(MEASURES)) == set(table.column_names)
+
+
+def test_resume_runs_only_the_missing_rows(engine, tmp_path):
+    spec = parse_spec(SPEC, "small.yaml")
+    run_sweep(spec, tmp_path, engine, progress=False)
+    lines = (tmp_path / RESULTS_CSV).read_text().splitlines()
+    (tmp_path / RESULTS_CSV).write_text("\n".join(lines[:4]) + "\n")  # header and three rows
+    again = run_sweep(spec, tmp_path, engine, resume=True, progress=False)
+    assert (again["run"], again["skipped"]) == (5, 3)
+    rows = rows_of(tmp_path)
+    assert len(rows) == 8 and len({r["key"] for r in rows}) == 8
+
+
+def test_scene_parameters_change_the_mechanism(engine, tmp_path):
+    spec = parse_spec(
+        "scenes: [four_bar]\nduration: 0.05\nsettings: {closure: exact}\nreference: false\n"
+        "grid:\n  mass.crank: [1.0, 4.0]\n  initial.crank_joint: [0.0, 20.0]\n", "p.yaml")
+    run_sweep(spec, tmp_path, engine, progress=False)
+    rows = rows_of(tmp_path)
+    assert len(rows) == 4 and all(r["status"] == "ok" for r in rows)
+    drifts = {(r["mass.crank"], r["initial.crank_joint"]): float(r["energy_drift"]) for r in rows}
+    assert len(set(drifts.values())) == 4  # four different mechanisms or start poses
+
+
+def _children(pid: int) -> set[int]:
+    out = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out |= {int(x) for x in (task / "children").read_text().split()}
+        except OSError:
+            continue
+    for child in list(out):
+        out |= _children(child)
+    return out
+
+
+def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
+    spec = tmp_path / "big.yaml"
+    spec.write_text(SPEC.replace("duration: 0.05", "duration: 0.3").replace(
+        "omega_n: [60, 5000]", "omega_n: [40, 50, 60, 70, 80, 90, 100, 110]"))
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vjm_ros.app.cli", "sweep", str(spec), "--out", str(out),
+         "--workers", "2", "--no-progress"], cwd=ROOT, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True)
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120  # a hang guard
+        while time.monotonic() < deadline:
+            workers |= _children(proc.pid)
+            if (out / RESULTS_CSV).exists() and len(rows_of(out)) >= 2:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130, stderr
+    result = json.loads(stdout.strip().splitlines()[-1])
+    assert result["interrupted"]
+    rows = rows_of(out)
+    assert 2 <= len(rows) < 32
+    assert all(r["status"] in ("ok", "refused (stiffness)", "diverged") for r in rows)
+    assert pq.read_table(out / RESULTS_PARQUET).num_rows == len(rows)
+    deadline = time.monotonic() + 30  # a hang guard: processes need a moment to exit
+    while time.monotonic() < deadline and any(Path(f"/proc/{p}").exists() for p in workers):
+        time.sleep(0.1)
+    alive = {p: Path(f"/proc/{p}/cmdline").read_bytes()[:200] for p in workers
+             if Path(f"/proc/{p}").exists()}
+    assert workers and not alive, alive
+
+
+def test_tune_writes_the_best_gains_as_a_loadable_snippet(tmp_path):
+    out = tmp_path / "tune"
+    done = subprocess.run(
+        [sys.executable, "-m", "vjm_ros.app.cli", "tune", "four_bar", "--integrator", "rk4",
+         "--rate", "1000", "--duration", "0.1", "--workers", "2", "--no-progress",
+         "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout.strip().splitlines()[-1])
+    rows = [r for r in rows_of(out) if r["status"] == "ok"]
+    best = min(float(r["max_closure_error"]) for r in rows)
+    assert summary["chosen"]["max_closure_error"] == best
+    assert any(r["status"].startswith("refused") for r in rows_of(out))  # beyond the bound
+    snippet = yaml.safe_load((out / "gains.yaml").read_text())["closure_method"]
+    assert snippet["omega_n"] == summary["chosen"]["omega_n"]
+    from vjm_ros.scene import load_scene, parse_scene
+
+    base = yaml.safe_load(load_scene("four_bar").text)
+    base["closure_method"] = snippet
+    assert parse_scene(yaml.safe_dump(base), "tuned").gains["omega_n"] == snippet["omega_n"]
+    assert (out / "tuning.png").stat().st_size > 10_000
+    assert os.path.exists(summary["figure"])
