@@ -180,10 +180,11 @@ def run_sweep(
     todo = [c for c in cases if c.key not in done_keys]
     client = engine.client
     references = _references(spec, todo, client) if spec.reference else {}
+    batches = _batches(todo, engine.n_workers)
     futures = [
-        client.submit(_run, c, references.get(_ref_key(c)), key=f"case-{c.key}-{os.getpid()}",
-                      pure=False)
-        for c in todo
+        client.submit(_run_batch, batch, references.get(_ref_key(batch[0])),
+                      key=f"cases-{batch[0].key}-{len(batch)}-{os.getpid()}", pure=False)
+        for batch in batches
     ]
     bar = SweepProgress(len(todo), progress)
     failed = 0
@@ -194,24 +195,27 @@ def run_sweep(
         writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         if mode == "w":
             writer.writeheader()
+        n = 0
         try:
-            for n, fut in enumerate(as_completed(futures), 1):
+            for fut in as_completed(futures):
                 try:
-                    row = fut.result()
-                except Exception as exc:  # a worker died or the run raised: a row with why
-                    case = todo[futures.index(fut)]
-                    row = {**case.as_row(), **dict.fromkeys(MEASURES), "status": "error",
-                           "message": f"{type(exc).__name__}: {exc}"}
-                writer.writerow({k: _cell(row.get(k)) for k in columns})
+                    rows = fut.result()
+                except Exception as exc:  # a worker died or a run raised: rows with why
+                    batch = batches[futures.index(fut)]
+                    rows = [{**case.as_row(), **dict.fromkeys(MEASURES), "status": "error",
+                             "message": f"{type(exc).__name__}: {exc}"} for case in batch]
+                for row in rows:
+                    writer.writerow({k: _cell(row.get(k)) for k in columns})
+                    failed += row.get("status") != "ok"
+                    if on_row is not None:
+                        on_row(row)
                 f.flush()
-                failed += row.get("status") != "ok"
-                if on_row is not None:
-                    on_row(row)
+                n += len(rows)
                 bar.update(n, failed)
         except KeyboardInterrupt:
             interrupted = True
             client.cancel(futures)
-        bar.update(sum(f.done() for f in futures), failed, final=True)
+        bar.update(n, failed, final=True)
     parquet = write_parquet(table, out / RESULTS_PARQUET)
     return {
         "rows": len(cases), "run": len(todo), "skipped": len(cases) - len(todo), "failed": failed,
@@ -220,10 +224,29 @@ def run_sweep(
     }
 
 
-def _run(case: Case, reference):
+def _run_batch(cases: list[Case], reference) -> list[dict]:
     from vjm_ros.studies.sweep.run import run_case
 
-    return run_case(case, reference)
+    return [run_case(case, reference) for case in cases]
+
+
+BATCHES_PER_WORKER = 25
+"""Tasks per worker a sweep is cut into: few enough that the scheduler's cost per task is small
+against the runs (one task per run cost 4.9 ms per run here, batches of four 1.8-2.4 ms), many
+enough that the workers finish together (8 per worker left one idle at the end: 1.71x on two
+workers against 1.80-1.85x with 25)."""
+
+
+def _batches(cases: Sequence[Case], workers: int) -> list[list[Case]]:
+    """Consecutive cases of one scene and parameter set (one reference), in tasks of equal size."""
+    size = max(1, len(cases) // max(workers * BATCHES_PER_WORKER, 1))
+    out: list[list[Case]] = []
+    for case in cases:
+        if out and len(out[-1]) < size and _ref_key(out[-1][0]) == _ref_key(case):
+            out[-1].append(case)
+        else:
+            out.append([case])
+    return out
 
 
 def _ref_key(case: Case) -> tuple:
