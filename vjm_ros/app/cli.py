@@ -1,6 +1,7 @@
 """Command line interface ``vjm`` (works without ROS).
 
-Subcommands: ``scenes``, ``run``, ``bench``, ``sweep``, ``tune``, ``replay``, ``recover``. See
+Subcommands: ``scenes``, ``run``, ``model``, ``bench``, ``sweep``, ``tune``, ``replay``,
+``recover``. See
 docs/design.md section 5.
 
 Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
@@ -127,6 +128,9 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("rest", nargs=argparse.REMAINDER)
     tu = sub.add_parser("tune", help="penalty gains for an integrator and step", add_help=False)
     tu.add_argument("rest", nargs=argparse.REMAINDER)
+    from vjm_ros.app import model_cli
+
+    model_cli.add_parser(sub)
     rp = sub.add_parser("replay", help="rerun recording from an MCAP log")
     rp.add_argument("mcap", type=Path)
     rp.add_argument("-o", "--output", type=Path, help="output .rrd (default: next to the log)")
@@ -153,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_scenes()
         if args.command == "run":
             return _cmd_run(args)
+        if args.command == "model":
+            from vjm_ros.app import model_cli
+
+            return model_cli.run(args)
         if args.command == "replay":
             from vjm_ros.logs.replay import replay
 

@@ -61,7 +61,8 @@ def assembled_scene_yaml(scene: Scene) -> str:
 
 
 def with_initial_positions(
-    model: Model, positions: dict[str, float], tolerance: float = 1e-10
+    model: Model, positions: dict[str, float], tolerance: float = 1e-10,
+    name: str = "initial_positions",
 ) -> Model:
     """The model started from given joint values, the other coordinates assembled.
 
@@ -73,6 +74,8 @@ def with_initial_positions(
         joints are held while the others are solved so that the closures hold.
     tolerance : float
         Largest closure residual accepted, m or rad.
+    name : str
+        How the positions are named in error messages (the parameter or flag).
 
     Returns
     -------
@@ -87,15 +90,15 @@ def with_initial_positions(
     names = model.joint_names
     q, qd = model.initial_state()
     fixed = []
-    for name, value in positions.items():
-        if name not in names:
+    for joint, value in positions.items():
+        if joint not in names:
             raise ConfigurationError(
-                f"initial_positions.{name}: expected a joint of {model.name} "
-                f"({', '.join(names)}), found {name!r}"
+                f"{name}.{joint}: expected a joint of {model.name} "
+                f"({', '.join(names)}), found {joint!r}"
             )
         if not math.isfinite(value):
-            raise ConfigurationError(f"initial_positions.{name}: expected a finite number, found {value}")
-        i = names.index(name)
+            raise ConfigurationError(f"{name}.{joint}: expected a finite number, found {value}")
+        i = names.index(joint)
         q[i], qd[i] = float(value), 0.0
         fixed.append(i)
     if not fixed:
@@ -106,7 +109,7 @@ def with_initial_positions(
     if not err <= tolerance or not np.all(np.isfinite(q_new)):
         given = ", ".join(f"{n} = {v:g}" for n, v in positions.items())
         raise ConfigurationError(
-            f"initial_positions: expected joint values the closures can meet, found {given} "
+            f"{name}: expected joint values the closures can meet, found {given} "
             f"(closure residual {err:.3g} after assembly, tolerance {tolerance:g})"
         )
     return model.with_state(q_new, qd_new)
