@@ -57,6 +57,7 @@ setup(
             "vjm = vjm_ros.app.cli:main",
             "vjm_sim_node = vjm_ros.ros.node:main",
             "vjm_pd_controller = vjm_ros.ros.controller:main",
+            "vjm_ct_controller = vjm_ros.ros.computed_torque:main",
         ],
     },
 )

@@ -150,14 +150,7 @@ def test_singular_configuration_is_refused():
 
 def _singular_call(m, q):
     """The velocity map at ``q`` with the closure check relaxed (q need not be assembled)."""
-    import vjm_ros.control.closed_model as cm
-
-    saved = cm.CLOSURE_TOLERANCE
-    cm.CLOSURE_TOLERANCE = np.inf
-    try:
-        return m.velocity_map(q)
-    finally:
-        cm.CLOSURE_TOLERANCE = saved
+    return ClosedChainModel(m.model, closure_tolerance=np.inf).velocity_map(q)
 
 
 @pytest.mark.parametrize(

@@ -95,6 +95,10 @@ class ClosedChainModel:
     independent : sequence of str, optional
         Joint names of the independent coordinates (``d`` of them); default: the first ``d``
         actuated joints, then other joints in order.
+    closure_tolerance : float
+        Largest closure residual of a state the dynamics accept, m or rad: the default suits
+        assembled states and exact closure; a controller reading a penalty-closed simulator
+        (closures met to ~1 mm) passes a looser bound.
 
     Raises
     ------
@@ -102,8 +106,10 @@ class ClosedChainModel:
         Unknown joint names, or a count other than the degrees of freedom.
     """
 
-    def __init__(self, model: Model, independent: Sequence[str] | None = None) -> None:
+    def __init__(self, model: Model, independent: Sequence[str] | None = None,
+                 closure_tolerance: float = CLOSURE_TOLERANCE) -> None:
         self.model = model
+        self.closure_tolerance = float(closure_tolerance)
         self.closures = ClosureSet(model)
         self.n = model.n
         q0, _ = model.initial_state()
@@ -131,17 +137,18 @@ class ClosedChainModel:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_scene(cls, scene: str | Path | Scene, independent: Sequence[str] | None = None):
+    def from_scene(cls, scene: str | Path | Scene, independent: Sequence[str] | None = None,
+                   **kwargs):
         """From a built-in scene name, a scene file, or a loaded :class:`Scene`."""
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
-        return cls(scene.model, independent)
+        return cls(scene.model, independent, **kwargs)
 
     @classmethod
     def from_yaml(cls, text: str, independent: Sequence[str] | None = None,
-                  source: str = "scene_description"):
+                  source: str = "scene_description", **kwargs):
         """From scene YAML text, e.g. what the node publishes on ``~/scene_description``."""
-        return cls(parse_scene(text, source=source).model, independent)
+        return cls(parse_scene(text, source=source).model, independent, **kwargs)
 
     # ------------------------------------------------------------------ arguments
     def coordinates(self, values, name: str = "q") -> np.ndarray:
@@ -249,9 +256,9 @@ class ClosedChainModel:
     def _terms(self, q: np.ndarray, qd: np.ndarray):
         kin = forward_kinematics(self.model, q, qd)
         terms = self.closures.evaluate(kin)
-        if terms.residual.size and np.max(np.abs(terms.residual)) > CLOSURE_TOLERANCE:
+        if terms.residual.size and np.max(np.abs(terms.residual)) > self.closure_tolerance:
             raise ConfigurationError(
-                f"q: expected a state that meets the closures (within {CLOSURE_TOLERANCE:g}), "
+                f"q: expected a state that meets the closures (within {self.closure_tolerance:g}), "
                 f"found a residual of {np.max(np.abs(terms.residual)):.3g}; use assemble()")
         a = terms.jacobian
         a_v = a[:, self.dependent]
