@@ -66,7 +66,9 @@ class Engine:
         else:
             self.cluster = LocalCluster(
                 n_workers=self.workers, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=logging.ERROR,
+                # a free port for the scheduler's HTTP endpoint: several clusters may run on one
+                # machine, and a fixed port would collide
+                dashboard_address=":0", silence_logs=logging.ERROR,
             )
             self.client = Client(self.cluster)
         self.client.run(_warm_up)  # the compiled kernels load once per worker, before timing
