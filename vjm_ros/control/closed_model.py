@@ -24,7 +24,9 @@ A singular configuration is one where ``A_v`` loses rank (the dependent coordina
 determined by the independent ones); :meth:`ClosedChainModel.singularity_measure` is the smallest
 singular value of ``A_v`` and every method refuses a pose where it is below
 :data:`SINGULAR_TOLERANCE`. Physics: the package's own kinematics, dynamics and closure rows
-(:mod:`vjm_ros.core`), the same as the simulator's.
+(:mod:`vjm_ros.core`), the same as the simulator's. Joint-space inverse dynamics runs compiled
+(:mod:`vjm_ros.control.compiled`: ~12 us per call on three_chain); the rest uses the numpy
+formulation.
 """
 
 from __future__ import annotations
@@ -353,6 +355,10 @@ class ClosedChainModel:
         ------
         SingularConfigurationError, InfeasibleEffortsError, ConfigurationError
         """
+        if xdd is None and point is None and udd is not None and (
+            getattr(self, "_compiled_id", None) is not None or self._compiled() is not None
+        ):
+            return self._inverse_dynamics_compiled(q, qd, udd, weights, preload, respect_limits)
         rd = self.reduced_dynamics(q, qd)
         if xdd is not None or point is not None:
             if xdd is None or point is None or udd is not None:
@@ -367,6 +373,60 @@ class ClosedChainModel:
         w = rd.mass_matrix @ self._vector(udd, self.dof, "udd") + rd.coriolis + rd.gravity
         limits = self.limits if respect_limits else np.full(len(self.limits), np.inf)
         return distribute(rd.effort_map, w, limits, weights, preload)
+
+
+    # ------------------------------------------------------------------ compiled path
+    def _compiled(self):
+        """The compiled joint-space inverse dynamics (None without numba)."""
+        from vjm_ros.core.kernels import HAVE_NUMBA
+
+        if not HAVE_NUMBA:
+            return None
+        if getattr(self, "_compiled_id", None) is None:
+            from vjm_ros.control.compiled import CompiledInverseDynamics
+
+            self._compiled_id = CompiledInverseDynamics(self.model, self.independent)
+        return self._compiled_id
+
+    def _inverse_dynamics_compiled(self, q, qd, udd, weights, preload, respect_limits):
+        """Joint-space inverse dynamics through the compiled path; arguments are validated by
+        the compiled code first and again here, naming them, only when it refuses them."""
+        from vjm_ros.control import compiled as C
+
+        fast = self._compiled_id
+        n = self.n
+        if not (type(q) is np.ndarray and q.shape == (n,) and q.dtype == np.float64):
+            q = self.coordinates(q)
+        if not (type(qd) is np.ndarray and qd.shape == (n,) and qd.dtype == np.float64):
+            qd = self.coordinates(qd, "qd")
+        if not (type(udd) is np.ndarray and udd.shape == (self.dof,) and udd.dtype == np.float64):
+            udd = self._vector(udd, self.dof, "udd")
+        if weights is None:
+            winv = fast.ones
+        else:
+            wts = np.asarray(weights, dtype=float).reshape(-1)
+            if wts.shape != fast.ones.shape or not np.all(wts > 0):
+                raise ConfigurationError(
+                    f"weights: expected {len(fast.ones)} positive numbers, found {wts.tolist()}")
+            winv = 1.0 / wts
+        limits = self.limits if respect_limits else fast.unlimited
+        status = fast(q, qd, udd, winv, limits, self.closure_tolerance, SINGULAR_TOLERANCE)
+        if status == C.NONFINITE:
+            self.coordinates(q)
+            self.coordinates(qd, "qd")
+            self._vector(udd, self.dof, "udd")
+        if status == C.OFF_CLOSURES:
+            self._terms(q, qd)  # raises the error that names the residual
+        if status == C.SINGULAR:
+            raise SingularConfigurationError(
+                f"q: a singular configuration of {self.model.name} (the dependent-coordinate "
+                f"closure Jacobian loses rank: its smallest singular value < {SINGULAR_TOLERANCE:g})")
+        if status == C.UNDERACTUATED:
+            raise InfeasibleEffortsError(
+                "the actuators cannot produce every motion at this pose (S^T B has not full rank)")
+        if preload or status == C.BEYOND_LIMITS:
+            return distribute(fast.p.copy(), fast.w.copy(), limits, weights, preload)
+        return fast.tau.copy()
 
 
 def distribute(p: np.ndarray, w: np.ndarray, limits: np.ndarray, weights=None,

@@ -1,0 +1,142 @@
+"""Compiled joint-space inverse dynamics of a closed chain, for controllers at 1 kHz and more.
+
+One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.run`, ``EVALUATE``) fills
+``M``, ``b``, ``A``, ``Adot qd`` and ``C`` into preallocated buffers; one compiled function
+(:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
+``P = S^T B`` and the minimum ``W``-norm efforts. The algebra is that of
+:mod:`vjm_ros.control.closed_model` (checked equal there to round-off), without Python-level
+array operations: the cost is the two calls' entry overhead plus a few microseconds of arithmetic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vjm_ros.core import kernels as K
+from vjm_ros.core.constraints import ExactClosure
+from vjm_ros.core.model import Model
+
+OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS = 0, 1, 2, 3, 4, 5
+"""Status codes of :func:`reduced_inverse_dynamics`."""
+
+
+@K._jit
+def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuated, udd, winv,
+                             limits, closure_tolerance, singular_tolerance, tau, p_out, w_out):
+    """Minimum-norm efforts for independent accelerations ``udd``; a status code.
+
+    ``mm`` (n, n), ``bias`` (n,), ``jac`` (r, n), ``crow`` (r, 7) come from the kernel's
+    evaluation; ``independent`` (d,), ``dependent`` (r,), ``actuated`` (m,) are coordinate
+    indices; ``winv`` (m,) the inverse weights, ``limits`` (m,) the largest efforts. Writes
+    ``tau`` (m,), ``p_out`` (d, m) and ``w_out`` (d,).
+    """
+    n = mm.shape[0]
+    d = independent.shape[0]
+    r = dependent.shape[0]
+    m = actuated.shape[0]
+    for i in range(r):
+        if abs(crow[i, K.R_RES]) > closure_tolerance:
+            return OFF_CLOSURES
+    s_map = np.zeros((n, d))
+    s_bias = np.zeros(n)
+    for j in range(d):
+        s_map[independent[j], j] = 1.0
+    if r > 0:
+        a_v = np.empty((r, r))
+        rhs = np.empty((r, d + 1))
+        for i in range(r):
+            for j in range(r):
+                a_v[i, j] = jac[i, dependent[j]]
+            for j in range(d):
+                rhs[i, j] = jac[i, independent[j]]
+            rhs[i, d] = crow[i, K.R_BIAS]
+        sv = np.linalg.svd(a_v)[1]
+        if sv[r - 1] < singular_tolerance:
+            return SINGULAR
+        x = np.linalg.solve(a_v, rhs)
+        for i in range(r):
+            for j in range(d):
+                s_map[dependent[i], j] = -x[i, j]
+            s_bias[dependent[i]] = -x[i, d]
+    qdd = s_map @ udd + s_bias
+    force = mm @ qdd + bias
+    for j in range(d):
+        acc = 0.0
+        for i in range(n):
+            acc += s_map[i, j] * force[i]
+        w_out[j] = acc
+        for k in range(m):
+            p_out[j, k] = s_map[actuated[k], j]
+    g = np.zeros((d, d))
+    for a in range(d):
+        for b in range(d):
+            acc = 0.0
+            for k in range(m):
+                acc += p_out[a, k] * winv[k] * p_out[b, k]
+            g[a, b] = acc
+    if np.linalg.svd(g)[1][d - 1] < 1e-14 * max(1.0, np.abs(g).max()):
+        return UNDERACTUATED
+    lam = np.linalg.solve(g, w_out)
+    for k in range(m):
+        acc = 0.0
+        for j in range(d):
+            acc += p_out[j, k] * lam[j]
+        tau[k] = winv[k] * acc
+    for k in range(m):
+        if abs(tau[k]) > limits[k]:
+            return BEYOND_LIMITS
+    return OK
+
+
+class CompiledInverseDynamics:
+    """Preallocated kernel buffers and index arrays of one model (one per controller).
+
+    Parameters
+    ----------
+    model : Model
+    independent : list of int
+        Independent coordinates (see :class:`~vjm_ros.control.ClosedChainModel`).
+    """
+
+    def __init__(self, model: Model, independent: list[int]) -> None:
+        from vjm_ros.core.compiled import FastMechanism
+
+        self.mech = FastMechanism(model, ExactClosure(alpha=0.0, beta=0.0))
+        n, self.n = model.n, model.n
+        self.buffers = self.mech._new_buffers()
+        self.args = (self.mech._lint, self.mech._lflt, self.mech._cint, self.mech._cflt,
+                     self.mech._gains, self.mech._par)
+        self.independent = np.array(independent, dtype=np.int64)
+        self.dependent = np.array([i for i in range(n) if i not in independent], dtype=np.int64)
+        self.actuated = np.array([a.joint for a in model.actuators], dtype=np.int64)
+        m, d = len(self.actuated), len(independent)
+        self.ones, self.unlimited = np.ones(m), np.full(m, np.inf)
+        self.zeros = np.zeros(n)
+        self.out_a, self.out_b = np.empty(n), np.empty(n)
+        self.tau, self.p, self.w = np.empty(m), np.empty((d, m)), np.empty(d)
+
+    def __call__(self, q: np.ndarray, qd: np.ndarray, udd: np.ndarray, winv: np.ndarray,
+                 limits: np.ndarray, closure_tolerance: float, singular_tolerance: float) -> int:
+        """Evaluate the model at ``(q, qd)`` and the efforts for ``udd``; a status code."""
+        if not _finite(q, qd, udd):
+            return NONFINITE
+        status = K.run(K.EVALUATE, q, qd, self.zeros, 0.0, 1, 0.0, *self.args, *self.buffers,
+                       self.out_a, self.out_b)
+        if status:
+            return SINGULAR
+        _, mm, bias, _, crow, jac, _ = self.buffers
+        return reduced_inverse_dynamics(mm, bias, jac, crow, self.independent, self.dependent,
+                                        self.actuated, udd, winv, limits, closure_tolerance,
+                                        singular_tolerance, self.tau, self.p, self.w)
+
+
+@K._jit
+def _finite(q, qd, udd):
+    for x in (q, qd):
+        for i in range(x.shape[0]):
+            if not np.isfinite(x[i]):
+                return False
+    for i in range(udd.shape[0]):
+        if not np.isfinite(udd[i]):
+            return False
+    return True
