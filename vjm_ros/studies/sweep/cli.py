@@ -62,6 +62,9 @@ def main(command: str, argv: list[str]) -> int:
     except (SceneError, ConfigurationError) as exc:
         print(f"vjm {command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:  # before the runs started (the cluster was starting)
+        print(f"vjm {command}: interrupted before any run", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _sweep(args) -> int:

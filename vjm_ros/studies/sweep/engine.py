@@ -25,6 +25,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.logs.signals import StopSignals
 from vjm_ros.studies.sweep.run import MEASURES, case_duration, case_scene, case_settings
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
 
@@ -193,13 +194,17 @@ def run_sweep(
     started = time.perf_counter()
     interrupted = False
     mode = "a" if resume and table.exists() else "w"
-    with table.open(mode, newline="") as f:
+    # SIGINT/SIGTERM only set a flag (logs.signals): nothing inside Dask is interrupted, and the
+    # loop stops at the next finished batch, keeping every row written.
+    with StopSignals() as stop, table.open(mode, newline="") as f:
         writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         if mode == "w":
             writer.writeheader()
         n = 0
         try:
             for fut in as_completed(futures):
+                if stop.requested:
+                    break
                 try:
                     rows = fut.result()
                 except Exception as exc:  # a worker died or a run raised: rows with why
@@ -214,8 +219,11 @@ def run_sweep(
                 f.flush()
                 n += len(rows)
                 bar.update(n, failed)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # a signal handler other than ours (not the main thread)
             interrupted = True
+        if stop.requested:
+            interrupted = True
+        if interrupted:
             client.cancel(futures)
         bar.update(n, failed, final=True)
     parquet = write_parquet(table, out / RESULTS_PARQUET)
