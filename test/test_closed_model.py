@@ -226,3 +226,27 @@ def test_compiled_path_equals_the_numpy_formulation(name):
         m.inverse_dynamics(q, np.full(m.n, np.nan), udd)
     with pytest.raises(ConfigurationError, match="meets the closures"):
         m.inverse_dynamics(q + 0.05, qd, udd)
+
+
+@pytest.mark.parametrize("name", ["five_bar", "three_chain", "six_bar"])
+def test_reduced_dynamics_balance_the_power_of_the_energies(name):
+    """Oracle: d(T + V)/dt along a motion equals ud . (M_r udd + c_r + g_r), the power the
+    actuators deliver (B tau . qd = (S^T B tau) . ud). T and V come from the energy functions
+    of the open chains (mass-centre velocities and heights), differentiated numerically."""
+    from vjm_ros.core.dynamics import kinetic_energy, potential_energy
+
+    m = ClosedChainModel.from_scene(name)
+    q, qd, ud = state(m)
+    udd = np.linspace(0.8, -0.6, m.dof)
+    u0 = q[m.independent]
+
+    def energy(t):
+        qt = m.assemble(u0 + ud * t + 0.5 * udd * t * t, guess=q)
+        qdt = m.dependent_velocities(qt, ud + udd * t)
+        return kinetic_energy(m.model, qt, qdt) + potential_energy(m.model, qt)
+
+    h = 1e-5  # central difference: h^2 terms ~1e-10 J/s; assembly noise 1e-13 J / h ~1e-8
+    power_fd = (energy(h) - energy(-h)) / (2 * h)
+    rd = m.reduced_dynamics(q, qd)
+    power = ud @ (rd.mass_matrix @ udd + rd.coriolis + rd.gravity)
+    assert power_fd == pytest.approx(power, rel=1e-6, abs=1e-6)
