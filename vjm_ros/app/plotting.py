@@ -258,86 +258,58 @@ def _draw_ground(ax, ground) -> list:
 def displacements_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute link angles and, when the scene has prismatic joints, the joint slides.
 
-    Parameters
-    ----------
-    traj : Trajectory
-    name : str
-        Title prefix.
-
-    Returns
-    -------
-    Figure
+    Arguments and result as :func:`displacements_figure`.
     """
-    return _motion_figure(
-        traj,
-        traj["theta"],
-        traj["q"],
-        f"{name}: displacements",
-        (r"angular displacement $\theta$ (rad)", "slide B (m)"),
-        ("absolute link angles", "prismatic joint slides"),
-    )
+    return _kinematics_figure(traj, name, "displacements")
 
 
 def velocities_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute angular velocities of the links and, if any, the slide rates.
 
-    Parameters
-    ----------
-    traj : Trajectory
-    name : str
-        Title prefix.
-
-    Returns
-    -------
-    Figure
+    Arguments and result as :func:`displacements_figure`.
     """
-    qd = traj["qd"]
-    return _motion_figure(
-        traj,
-        absolute_rates(traj.model, qd),
-        qd,
-        f"{name}: velocities",
-        (r"angular velocity $\omega$ (rad/s)", "slide rate (m/s)"),
-        ("absolute angular velocities of the links", "prismatic joint velocities"),
-    )
+    return _kinematics_figure(traj, name, "velocities")
 
 
 def accelerations_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute angular accelerations of the links and, if any, the slide accelerations.
 
-    Parameters
-    ----------
-    traj : Trajectory
-    name : str
-        Title prefix.
-
-    Returns
-    -------
-    Figure
+    Arguments and result as :func:`displacements_figure`.
     """
-    qdd = traj["qdd"]
-    return _motion_figure(
-        traj,
-        absolute_rates(traj.model, qdd),
-        qdd,
-        f"{name}: accelerations",
+    return _kinematics_figure(traj, name, "accelerations")
+
+
+_KINEMATICS = {
+    "displacements": (
+        ("theta", "q"),
+        (r"angular displacement $\theta$ (rad)", "slide B (m)"),
+        ("absolute link angles", "prismatic joint slides"),
+    ),
+    "velocities": (
+        (None, "qd"),
+        (r"angular velocity $\omega$ (rad/s)", "slide rate (m/s)"),
+        ("absolute angular velocities of the links", "prismatic joint velocities"),
+    ),
+    "accelerations": (
+        (None, "qdd"),
         (r"angular acceleration $\alpha$ (rad/s$^2$)", "slide acceleration (m/s$^2$)"),
         ("absolute angular accelerations of the links", "prismatic joint accelerations"),
-    )
+    ),
+}
+"""Columns, axis labels and panel titles of the three kinematic figures."""
+
+
+def _kinematics_figure(traj: Trajectory, name: str, kind: str) -> Figure:
+    (angles, coords), labels, titles = _KINEMATICS[kind]
+    values = traj[coords]
+    absolute = traj[angles] if angles else absolute_rates(traj.model, values)
+    return _motion_figure(traj, absolute, values, f"{name}: {kind}", labels, titles)
 
 
 def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     """World-frame closure forces (and moments of angle closures) against time.
 
-    Parameters
-    ----------
-    traj : Trajectory
-    name : str
-        Title prefix.
-
-    Returns
-    -------
-    Figure
+    Arguments and result as :func:`displacements_figure`.
     """
     model = traj.model
     t = traj["t"]
@@ -383,15 +355,7 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
 def energy_figure(traj: Trajectory, name: str) -> Figure:
     """Kinetic, potential, constraint (if non-zero) and total energy against time.
 
-    Parameters
-    ----------
-    traj : Trajectory
-    name : str
-        Title prefix.
-
-    Returns
-    -------
-    Figure
+    Arguments and result as :func:`displacements_figure`.
     """
     t = traj["t"]
     energy = traj["energy"]

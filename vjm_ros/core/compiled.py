@@ -172,18 +172,7 @@ class FastClosureSet(ClosureSet):
         return np.sqrt(np.add.reduceat(terms.residual**2, self._starts))
 
     def closure_forces(self, terms: ClosureTerms, row_force: np.ndarray) -> np.ndarray:
-        """World-frame force of each closure from per-row forces.
-
-        Parameters
-        ----------
-        terms : ClosureTerms
-        row_force : ndarray, shape (r,)
-
-        Returns
-        -------
-        ndarray, shape (k, 3)
-            ``(Fx, Fy, Mz)`` acting on ``Pa``: N, N, N m.
-        """
+        """As :meth:`ClosureSet.closure_forces`, with one reduction instead of a loop."""
         if not len(self._starts):
             return np.zeros((0, 3))
         return np.add.reduceat(terms.row_direction * row_force[:, None], self._starts, axis=0)

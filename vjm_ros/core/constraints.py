@@ -238,12 +238,8 @@ def closure_mobility(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarra
 
 
 def effective_masses(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
-    """Effective mass of each closure row, ``1 / (A M^-1 A^T)_ii``.
-
-    Parameters
-    ----------
-    mass_matrix : ndarray, shape (n, n)
-    jacobian : ndarray, shape (r, n)
+    """Effective mass of each closure row, ``1 / (A M^-1 A^T)_ii`` (arguments as
+    :func:`closure_mobility`).
 
     Returns
     -------

@@ -168,6 +168,15 @@ def add_angle_jacobian(jac, row, sign, link, lint):
 
 
 @_jit
+def _com_column(lint, kin, k, cx, cy):
+    """Column ``k`` of a point's translational Jacobian at ``(cx, cy)``: ``z x (P - O_k)`` for a
+    revolute coordinate, the slide direction for a prismatic one."""
+    if lint[k, L_REV] == 1:
+        return -(cy - kin[k, K_OY]), cx - kin[k, K_OX]
+    return -kin[k, K_PSIN], kin[k, K_PCOS]
+
+
+@_jit
 def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, crow, jac,
           points):
     """Kinematics, dynamics and closure rows at ``(q, qd)`` into the output buffers.
@@ -249,20 +258,10 @@ def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, 
             fy = m * (acy - par[P_GY])
             start = lint[i, L_START]
             for k in range(start, i + 1):
-                if lint[k, L_REV] == 1:
-                    jxk = -(cy - kin[k, K_OY])
-                    jyk = cx - kin[k, K_OX]
-                else:
-                    jxk = -kin[k, K_PSIN]
-                    jyk = kin[k, K_PCOS]
+                jxk, jyk = _com_column(lint, kin, k, cx, cy)
                 bias[k] += jxk * fx + jyk * fy
                 for j in range(start, k + 1):
-                    if lint[j, L_REV] == 1:
-                        jxj = -(cy - kin[j, K_OY])
-                        jyj = cx - kin[j, K_OX]
-                    else:
-                        jxj = -kin[j, K_PSIN]
-                        jyj = kin[j, K_PCOS]
+                    jxj, jyj = _com_column(lint, kin, j, cx, cy)
                     v = m * (jxk * jxj + jyk * jyj)
                     if lint[k, L_REV] == 1 and lint[j, L_REV] == 1:
                         v += inertia

@@ -58,6 +58,12 @@ class Recorder:
 
     _closed: bool = True
 
+    def _check_open(self) -> None:
+        """Refuse a write after :meth:`close`."""
+        if self._closed:
+            where = getattr(self, "path", None) or getattr(self, "target", None)
+            raise ValueError(f"write to a closed recorder ({where})")
+
     def _finalize(self) -> None:
         """Write what is pending and release the sink (called once by :meth:`close`)."""
         raise NotImplementedError

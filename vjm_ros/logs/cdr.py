@@ -73,14 +73,8 @@ def to_message(type_name: str, value: dict):
 
 
 def encode(type_name: str, message: dict) -> bytes:
-    """Serialize a message dict to CDR with rosbags' serializer (ROS 2 Kilted definitions).
-
-    Parameters
-    ----------
-    type_name : str
-        Full ROS 2 type name.
-    message : dict
-        Fields as built by :mod:`vjm_ros.logs.messages` (nested dicts, lists of floats).
+    """Serialize a message dict to CDR with rosbags' serializer (ROS 2 Kilted definitions);
+    arguments as :func:`to_message`.
 
     Returns
     -------

@@ -241,15 +241,8 @@ class McapRecorder(Recorder):
 
     @atomic
     def write(self, sample) -> None:
-        """Log one tick.
-
-        Parameters
-        ----------
-        sample : Sample
-            From :meth:`vjm_ros.sim.simulator.Simulator.sample`.
-        """
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.path})")
+        """Log one tick's :class:`~vjm_ros.sim.simulator.Sample`."""
+        self._check_open()
         ns = self.timebase.to_ns(sample.t)
         put = self._put
         put(self._ch_joints, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
@@ -268,8 +261,7 @@ class McapRecorder(Recorder):
     @atomic
     def note(self, text: str) -> None:
         """Log ``text`` on ``/<node>/events`` at the latest recording time."""
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.path})")
+        self._check_open()
         ns = self.timebase.last_ns or 0
         self._add(self.topics.events, messages.STRING, messages.event(text), ns)
 
@@ -284,8 +276,7 @@ class McapRecorder(Recorder):
             omitted). Later samples are shifted to start one tick after it, where a ``reset`` event
             is logged.
         """
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.path})")
+        self._check_open()
         ns = self.timebase.reset(t)
         self._add(self.topics.events, messages.STRING, messages.event(RESET_EVENT), ns)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)

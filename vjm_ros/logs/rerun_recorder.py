@@ -272,15 +272,8 @@ class RerunRecorder(Recorder):
     # ------------------------------------------------------------------ writing
     @atomic
     def write(self, sample) -> None:
-        """Buffer one tick; send the buffer when full or old.
-
-        Parameters
-        ----------
-        sample : Sample
-            From :meth:`vjm_ros.sim.simulator.Simulator.sample`.
-        """
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.target})")
+        """Buffer one tick's :class:`~vjm_ros.sim.simulator.Sample`; send when full or old."""
+        self._check_open()
         ns = self.timebase.to_ns(sample.t)
         i = self._count
         self._t[i] = ns
@@ -369,8 +362,7 @@ class RerunRecorder(Recorder):
         t : float, optional
             Simulator time of the current episode, s; the latest recording time when omitted.
         """
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.target})")
+        self._check_open()
         self.send()
         ns = self.timebase.to_ns(t) if t is not None else (self.timebase.last_ns or 0)
         self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
@@ -379,8 +371,7 @@ class RerunRecorder(Recorder):
     @atomic
     def note_reset(self, t: float | None = None) -> None:
         """Mark a simulator reset (see :meth:`vjm_ros.logs.McapRecorder.note_reset`)."""
-        if self._closed:
-            raise ValueError(f"write to a closed recorder ({self.target})")
+        self._check_open()
         self.send()
         ns = self.timebase.reset(t)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)

@@ -28,9 +28,6 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-import rclpy
-import rclpy.exceptions
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -39,6 +36,7 @@ from vjm_ros.control import ClosedChainModel, InfeasibleEffortsError
 from vjm_ros.control.paths import PATHS
 from vjm_ros.core.errors import VjmError
 from vjm_ros.ros.conversions import joint_arrays, seconds
+from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.ros.scene_client import wait_for_scene_description
 
 
@@ -138,21 +136,7 @@ class ComputedTorqueNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point ``vjm_ct_controller``; runs until SIGINT or SIGTERM (exit code 0)."""
-    rclpy.init(args=args)
-    try:
-        node = ComputedTorqueNode()
-    except (ValueError, OSError, VjmError, rclpy.exceptions.ParameterException) as exc:
-        print(f"vjm_ct_controller: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node_until_signal(ComputedTorqueNode, "vjm_ct_controller", args)
 
 
 if __name__ == "__main__":

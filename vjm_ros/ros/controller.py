@@ -43,9 +43,6 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
-import rclpy
-import rclpy.exceptions
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -55,6 +52,7 @@ from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.kinematics import forward_kinematics
 from vjm_ros.core.model import HINGE, Model
 from vjm_ros.ros.conversions import joint_arrays, seconds
+from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.scene.loader import load_scene
 
 # ---------------------------------------------------------------------------------------------
@@ -376,21 +374,7 @@ class PdControllerNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console entry point ``vjm_pd_controller``; runs until SIGINT or SIGTERM (exit code 0)."""
-    rclpy.init(args=args)
-    try:
-        node = PdControllerNode()
-    except (ValueError, OSError, rclpy.exceptions.ParameterException) as exc:
-        print(f"vjm_pd_controller: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node_until_signal(PdControllerNode, "vjm_pd_controller", args)
 
 
 if __name__ == "__main__":

@@ -90,6 +90,35 @@ class StopOnSignals(StopSignals):
             loop.stop()
 
 
+def run_node_until_signal(make_node, name: str, args: list[str] | None = None) -> int:
+    """Console entry point of a controller node: build it, spin until SIGINT or SIGTERM.
+
+    Returns 0 after a signal, 2 when the node cannot be built (the reason on stderr).
+    """
+    import sys
+
+    import rclpy
+    import rclpy.exceptions
+
+    from vjm_ros.core.errors import VjmError
+
+    rclpy.init(args=args)
+    try:
+        node = make_node()
+    except (ValueError, OSError, VjmError, rclpy.exceptions.ParameterException) as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
 def raise_priority(priority: int, logger) -> None:
     """Put the calling thread under SCHED_FIFO at ``priority`` (0: leave it); warn if refused."""
     if priority <= 0:

@@ -112,22 +112,10 @@ def _read_file(spec: str) -> str:
 
 
 def parse_scene(text: str, source: str = "<string>") -> Scene:
-    """Parse and validate scene YAML text.
+    """Parse and validate scene YAML ``text``; ``source`` names it in error messages.
 
-    Parameters
-    ----------
-    text : str
-    source : str
-        Used in error messages.
-
-    Returns
-    -------
-    Scene
-
-    Raises
-    ------
-    SceneError
-        With ``source``, key path, expected and found value.
+    Returns the :class:`Scene`; raises :class:`~vjm_ros.core.errors.SceneError` as
+    :func:`load_scene` does.
     """
     if not isinstance(text, str):
         raise SceneError(source, FILE_KEY, "scene text (str)", type(text).__name__)

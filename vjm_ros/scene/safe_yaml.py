@@ -165,16 +165,8 @@ def where(mark) -> str:
 def parse_yaml(text: str, source: str) -> object:
     """The YAML document in ``text``, read by :class:`SceneLoader` within the limits.
 
-    Parameters
-    ----------
-    text : str
-    source : str
-        Used in error messages.
-
-    Returns
-    -------
-    object
-        The document (a mapping for any scene; the builder checks that).
+    ``text`` and ``source`` as in :func:`~vjm_ros.scene.loader.parse_scene`. Returns the
+    document (a mapping for any scene; the builder checks that).
 
     Raises
     ------

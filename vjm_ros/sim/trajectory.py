@@ -20,6 +20,16 @@ from vjm_ros.sim.simulator import Sample
 ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
 
 
+_SAMPLE_FIELDS = (
+    ("t", "t"), ("q", "q"), ("qd", "qd"), ("qdd", "qdd"), ("effort", "effort"),
+    ("theta", "theta"), ("points", "points"), ("force", "closure_force"),
+    ("error", "closure_error"), ("energy", "energy"), ("power", "power_in"),
+    ("dissipation", "dissipation"), ("segments", "segments"),
+)
+"""Columns of the trajectory buffer and the :class:`~vjm_ros.sim.simulator.Sample` field each
+one takes."""
+
+
 class Trajectory:
     """Samples of one run, stored as growing arrays.
 
@@ -60,19 +70,8 @@ class Trajectory:
                 self._buf[key] = np.concatenate((arr, np.zeros_like(arr)), axis=0)
         i = self._rows
         b = self._buf
-        b["t"][i] = s.t
-        b["q"][i] = s.q
-        b["qd"][i] = s.qd
-        b["qdd"][i] = s.qdd
-        b["effort"][i] = s.effort
-        b["theta"][i] = s.theta
-        b["points"][i] = s.points
-        b["force"][i] = s.closure_force
-        b["error"][i] = s.closure_error
-        b["energy"][i] = s.energy
-        b["power"][i] = s.power_in
-        b["dissipation"][i] = s.dissipation
-        b["segments"][i] = s.segments
+        for key, attr in _SAMPLE_FIELDS:
+            b[key][i] = getattr(s, attr)
         self._rows += 1
 
     def __getitem__(self, key: str) -> np.ndarray:

@@ -74,49 +74,20 @@ class AdaptiveIntegrator(Integrator):
         return y_end[:n].copy(), y_end[n:].copy()
 
 
-class Dop853(AdaptiveIntegrator):
-    """Explicit Runge-Kutta of order 8 (Dormand-Prince), for smooth non-stiff runs."""
-
-    name = "dop853"
-    order = 8
-    solver_class = DOP853
-
-
-class Rk45(AdaptiveIntegrator):
-    """Explicit Runge-Kutta 5(4) (Dormand-Prince)."""
-
-    name = "rk45"
-    order = 5
-    solver_class = RK45
+def _method(cls_name: str, name: str, order: int, solver, doc: str) -> type[AdaptiveIntegrator]:
+    """An adaptive integrator: scipy's ``solver`` under a registry ``name``."""
+    return type(cls_name, (AdaptiveIntegrator,), {
+        "__doc__": doc, "__module__": __name__, "name": name, "order": order,
+        "solver_class": solver,
+    })
 
 
-class Rk23(AdaptiveIntegrator):
-    """Explicit Runge-Kutta 3(2) (Bogacki-Shampine)."""
-
-    name = "rk23"
-    order = 3
-    solver_class = RK23
-
-
-class RadauIIA(AdaptiveIntegrator):
-    """Implicit Runge-Kutta Radau IIA of order 5, for stiff penalty gains."""
-
-    name = "radau"
-    order = 5
-    solver_class = Radau
-
-
-class Bdf(AdaptiveIntegrator):
-    """Variable-order backward differentiation formulas, for stiff penalty gains."""
-
-    name = "bdf"
-    order = 5
-    solver_class = _BDF
-
-
-class Lsoda(AdaptiveIntegrator):
-    """Adams/BDF switching (LSODA)."""
-
-    name = "lsoda"
-    order = 12
-    solver_class = LSODA
+Dop853 = _method("Dop853", "dop853", 8, DOP853,
+                 "Explicit Runge-Kutta of order 8 (Dormand-Prince), for smooth non-stiff runs.")
+Rk45 = _method("Rk45", "rk45", 5, RK45, "Explicit Runge-Kutta 5(4) (Dormand-Prince).")
+Rk23 = _method("Rk23", "rk23", 3, RK23, "Explicit Runge-Kutta 3(2) (Bogacki-Shampine).")
+RadauIIA = _method("RadauIIA", "radau", 5, Radau,
+                   "Implicit Runge-Kutta Radau IIA of order 5, for stiff penalty gains.")
+Bdf = _method("Bdf", "bdf", 5, _BDF,
+              "Variable-order backward differentiation formulas, for stiff penalty gains.")
+Lsoda = _method("Lsoda", "lsoda", 12, LSODA, "Adams/BDF switching (LSODA).")

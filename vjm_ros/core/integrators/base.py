@@ -147,16 +147,8 @@ class FixedStepIntegrator(Integrator):
         The scan over ``omega_n h`` in ``(0, 10]`` finds the first growing step; 60 bisections
         between the last stable and the first growing value follow. A subclass that overrides
         :meth:`stability_bound` (an unconditionally stable method) is asked value by value.
-
-        Parameters
-        ----------
-        zeta : array_like, shape (m,)
-            Damping ratios (dimensionless, >= 0).
-
-        Returns
-        -------
-        ndarray, shape (m,)
-            Bounds on ``omega_n h``; ``inf`` where no growth is found up to 10.
+        ``zeta``: damping ratios, shape (m,); returns the bounds on ``omega_n h``, shape (m,),
+        ``inf`` where no growth is found up to 10.
         """
         if type(self).stability_bound is not FixedStepIntegrator.stability_bound:
             return super().stability_bounds(zeta)

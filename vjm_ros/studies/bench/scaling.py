@@ -73,17 +73,7 @@ def star_scene(n_chains: int, gains: str = "closure_method: {method: penalty, om
 
     The first chain's tip is pinned to every other chain's tip (``n_chains - 1`` hinges, two rows
     each); the mechanism keeps two degrees of freedom. Links 0.6 m, 0.5 kg, ``I = m a^2 / 12``.
-
-    Parameters
-    ----------
-    n_chains : int
-        1 or more.
-    gains : str
-        The scene's ``closure_method`` line.
-
-    Returns
-    -------
-    Scene
+    ``n_chains`` (1 or more) and ``gains`` as ``n_links`` and ``gains`` of :func:`chain_scene`.
     """
     if n_chains < 1:
         raise ValueError("n_chains: expected 1 or more")
