@@ -58,30 +58,14 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
             for j in range(d):
                 s_map[dependent[i], j] = -x[i, j]
             s_bias[dependent[i]] = -x[i, d]
-    qdd = s_map @ udd + s_bias
-    force = mm @ qdd + bias
-    for j in range(d):
-        acc = 0.0
-        for i in range(n):
-            acc += s_map[i, j] * force[i]
-        w_out[j] = acc
-        for k in range(m):
-            p_out[j, k] = s_map[actuated[k], j]
-    g = np.zeros((d, d))
-    for a in range(d):
-        for b in range(d):
-            acc = 0.0
-            for k in range(m):
-                acc += p_out[a, k] * winv[k] * p_out[b, k]
-            g[a, b] = acc
+    force = mm @ (s_map @ udd + s_bias) + bias
+    w_out[:] = s_map.T @ force
+    for k in range(m):
+        p_out[:, k] = s_map[actuated[k], :]
+    g = (p_out * winv) @ p_out.T
     if np.linalg.svd(g)[1][d - 1] < 1e-14 * max(1.0, np.abs(g).max()):
         return UNDERACTUATED
-    lam = np.linalg.solve(g, w_out)
-    for k in range(m):
-        acc = 0.0
-        for j in range(d):
-            acc += p_out[j, k] * lam[j]
-        tau[k] = winv[k] * acc
+    tau[:] = winv * (p_out.T @ np.linalg.solve(g, w_out))
     for k in range(m):
         if abs(tau[k]) > limits[k]:
             return BEYOND_LIMITS

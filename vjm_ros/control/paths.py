@@ -28,45 +28,45 @@ def _phase(t: float, rate: float, approach: float) -> tuple[float, float, float]
 
 
 @dataclass(frozen=True)
-class Circle:
-    """A circle of ``radius`` (m) through ``start``, centre ``start - (radius, 0)``, counter-
-    clockwise, one turn per ``period`` s after ``approach`` s."""
-
-    start: tuple[float, float]
-    radius: float = 0.05
-    period: float = 2.0
-    approach: float = 1.0
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Position (m), velocity (m/s) and acceleration (m/s^2) at ``t`` s, each shape (2,)."""
-        phi, dphi, ddphi = _phase(t, 2 * math.pi / self.period, self.approach)
-        c, s = math.cos(phi), math.sin(phi)
-        r = self.radius
-        centre = np.asarray(self.start, dtype=float) - (r, 0.0)
-        x = centre + r * np.array([c, s])
-        v = r * dphi * np.array([-s, c])
-        a = r * ddphi * np.array([-s, c]) - r * dphi**2 * np.array([c, s])
-        return x, v, a
-
-
-@dataclass(frozen=True)
-class FigureEight:
-    """A figure-eight (lemniscate of Gerono) of half-width ``size`` (m) centred on ``start``:
-    ``x = start + size (sin p, sin p cos p)``, one loop pair per ``period`` s after ``approach``."""
+class TaskPath:
+    """A planar path of the tracked point from ``start`` (m), of size ``size`` (m), one cycle
+    per ``period`` s after ``approach`` s; subclasses give its shape as a function of the path
+    parameter."""
 
     start: tuple[float, float]
     size: float = 0.05
-    period: float = 4.0
+    period: float = 2.0
     approach: float = 1.0
+
+    def shape(self, p: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Offset from ``start`` (m) and its first and second derivatives in ``p``."""
+        raise NotImplementedError
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position (m), velocity (m/s) and acceleration (m/s^2) at ``t`` s, each shape (2,)."""
         p, dp, ddp = _phase(t, 2 * math.pi / self.period, self.approach)
+        x, d1, d2 = self.shape(p)
+        return np.asarray(self.start, dtype=float) + x, d1 * dp, d2 * dp**2 + d1 * ddp
+
+
+class Circle(TaskPath):
+    """A circle of radius ``size`` through ``start``, centre ``start - (size, 0)``,
+    counter-clockwise."""
+
+    def shape(self, p):
+        r, c, s = self.size, math.cos(p), math.sin(p)
+        return r * np.array([c - 1.0, s]), r * np.array([-s, c]), r * np.array([-c, -s])
+
+
+class FigureEight(TaskPath):
+    """A figure-eight (lemniscate of Gerono) of half-width ``size`` centred on ``start``:
+    ``start + size (sin p, sin p cos p)``."""
+
+    def shape(self, p):
         a = self.size
-        d1 = a * np.array([math.cos(p), math.cos(2 * p)])
-        d2 = a * np.array([-math.sin(p), -2 * math.sin(2 * p)])
-        x = np.asarray(self.start, dtype=float) + a * np.array([math.sin(p), 0.5 * math.sin(2 * p)])
-        return x, d1 * dp, d2 * dp**2 + d1 * ddp
+        return (a * np.array([math.sin(p), 0.5 * math.sin(2 * p)]),
+                a * np.array([math.cos(p), math.cos(2 * p)]),
+                a * np.array([-math.sin(p), -2 * math.sin(2 * p)]))
 
 
 PATHS = {"circle": Circle, "figure8": FigureEight}

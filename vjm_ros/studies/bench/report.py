@@ -185,32 +185,36 @@ def _front_table(front: Sequence[RowResult]) -> list[str]:
     return lines
 
 
-def _tier_table(rec: dict) -> list[str]:
-    lines = ["| tier | setting | ms per sim s | CPU ms per sim s | position err m "
-             "| max closure err m |", "|---|---|---|---|---|---|"]
+def _tier_rows(rec: dict, header: list[str], missing: str, cells) -> list[str]:
+    """A Markdown table with one row per accuracy tier: ``cells(b)`` or ``missing``."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for tier, _ in TIERS:
         b = rec.get(tier)
-        if b is None:
-            lines.append(f"| {tier} | no row qualifies | | | | |")
-        else:
-            lines.append(f"| {tier} | {b['label']} | {_ms(b['wall_per_sim_s'])} | "
-                         f"{_ms(b.get('cpu_per_sim_s'))} | {_e(b['position_deviation'])} | "
-                         f"{_e(b['max_closure_error'])} |")
+        row = [missing] + [""] * (len(header) - 2) if b is None else cells(b)
+        lines.append("| " + " | ".join([tier, *row]) + " |")
     return lines
+
+
+def _tier_table(rec: dict) -> list[str]:
+    return _tier_rows(
+        rec,
+        ["tier", "setting", "ms per sim s", "CPU ms per sim s", "position err m",
+         "max closure err m"],
+        "no row qualifies",
+        lambda b: [b["label"], _ms(b["wall_per_sim_s"]), _ms(b.get("cpu_per_sim_s")),
+                   _e(b["position_deviation"]), _e(b["max_closure_error"])],
+    )
 
 
 def _overall_table(rec: dict, n_scenes: int) -> list[str]:
-    lines = [f"| tier | setting (qualifies on all {n_scenes} scenes) | worst ms per sim s "
-             "| worst position err m | worst max closure err m |",
-             "|---|---|---|---|---|"]
-    for tier, _ in TIERS:
-        b = rec.get(tier)
-        if b is None:
-            lines.append(f"| {tier} | no single setting qualifies on every scene | | | |")
-        else:
-            lines.append(f"| {tier} | {b['label']} | {_ms(b['worst_wall_per_sim_s'])} "
-                         f"| {_e(b['worst_position_deviation'])} | {_e(b['worst_max_closure_error'])} |")
-    return lines
+    return _tier_rows(
+        rec,
+        ["tier", f"setting (qualifies on all {n_scenes} scenes)", "worst ms per sim s",
+         "worst position err m", "worst max closure err m"],
+        "no single setting qualifies on every scene",
+        lambda b: [b["label"], _ms(b["worst_wall_per_sim_s"]), _e(b["worst_position_deviation"]),
+                   _e(b["worst_max_closure_error"])],
+    )
 
 
 def _match_table(match: list[dict]) -> list[str]:

@@ -172,7 +172,11 @@ def _new_result(scene: str, cfg: RowConfig) -> RowResult:
 def _make_vjm(scene: Scene, cfg: RowConfig) -> Simulator:
     settings = SimulationSettings(integrator=cfg.integrator, rate=cfg.rate,
                                   substeps=cfg.substeps, **cfg.settings)
-    sim = Simulator(scene.model, settings, scene.gains)
+    return _started(scene, Simulator(scene.model, settings, scene.gains))
+
+
+def _started(scene: Scene, sim):
+    """``sim`` with the scene's default efforts applied (a simulator of either engine)."""
     if scene.model.actuators:
         sim.set_efforts(_efforts(scene))
     return sim
@@ -257,10 +261,7 @@ def _make_mujoco(scene: Scene, cfg: RowConfig):
 
     ms = MujocoSettings(integrator=cfg.integrator, rate=cfg.rate, substeps=cfg.substeps,
                         solref=tuple(cfg.settings["solref"]), solimp=tuple(cfg.settings["solimp"]))
-    sim = MujocoSimulator(scene.model, ms)
-    if scene.model.actuators:
-        sim.set_efforts(_efforts(scene))
-    return sim
+    return _started(scene, MujocoSimulator(scene.model, ms))
 
 
 def run_mujoco(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None) -> RowResult:
