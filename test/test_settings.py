@@ -72,3 +72,17 @@ def test_vjm_run_and_the_node_reach_the_same_settings(flags, params):
     from_cli = _settings(_parser().parse_args(["run", "five_bar", *flags]), scene)
     from_node = simulation_settings(NodeConfig(**params), scene)
     assert from_cli == from_node
+
+
+def test_unknown_setting_is_a_type_error_naming_it():
+    # A misspelt keyword must not be dropped silently: the resolver accepts **given.
+    with pytest.raises(TypeError, match="omgea_n"):
+        resolve_settings({}, {}, omgea_n=3.0)
+
+
+def test_every_user_setting_reaches_the_settings():
+    given = {"integrator": "semi_implicit_euler", "closure": "exact", "rate": 500.0,
+             "substeps": 3, "alpha": 7.0, "beta": 8.0, "projection": True, "rtol": 1e-5,
+             "atol": 1e-7}
+    s = resolve_settings({}, {}, **given)
+    assert {k: getattr(s, k) for k in given} == given

@@ -74,7 +74,9 @@ def mass_matrix(model: Model, q: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     model : Model
+        The mechanism.
     q : ndarray, shape (n,)
+        Joint coordinates, rad or m.
 
     Returns
     -------

@@ -35,6 +35,9 @@ GROUND = -1
 class Link:
     """One moving rigid link.
 
+    Its frame has the origin ``O_i`` at the joint in front of it, ``u(theta_i)`` along the link
+    and ``n(theta_i)`` a quarter turn counter-clockwise from ``u``.
+
     Attributes
     ----------
     name : str
@@ -53,10 +56,10 @@ class Link:
 
     name: str
     chain: int
-    length: float
-    mass: float
-    inertia: float
-    com: tuple[float, float]
+    length: float  # m
+    mass: float  # kg
+    inertia: float  # kg m^2
+    com: tuple[float, float]  # m, m
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,10 @@ class Joint:
 @dataclass(frozen=True)
 class Chain:
     """An open chain rooted at ground.
+
+    Its links follow one another from the ground point ``O``: a link's origin is
+    ``O_pred + a_pred u(theta_pred) + B n(theta_pred)``, with ``B`` the slide of the joint in
+    front of it (held at its locked value for a revolute joint).
 
     Attributes
     ----------

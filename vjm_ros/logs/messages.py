@@ -53,6 +53,11 @@ def ros_name(name: str) -> str:
     return out if out and not out[0].isdigit() else f"_{out}"
 
 
+def _private_topic(name: str) -> property:
+    """A :class:`Topics` property for the node's own topic ``<namespace>/<node>/<name>``."""
+    return property(lambda self: f"{self.private}/{name}", doc=f"``<namespace>/<node>/{name}``.")
+
+
 @dataclass(frozen=True)
 class Topics:
     """Topic names of one node, as ROS 2 resolves them.
@@ -88,25 +93,10 @@ class Topics:
         """``<namespace>/<node>``, the prefix of the node's own topics."""
         return f"{self._ns}/{self.node}"
 
-    @property
-    def constraint_forces(self) -> str:
-        """``<namespace>/<node>/constraint_forces``."""
-        return f"{self.private}/constraint_forces"
-
-    @property
-    def energy(self) -> str:
-        """``<namespace>/<node>/energy``."""
-        return f"{self.private}/energy"
-
-    @property
-    def markers(self) -> str:
-        """``<namespace>/<node>/markers``."""
-        return f"{self.private}/markers"
-
-    @property
-    def events(self) -> str:
-        """``<namespace>/<node>/events``."""
-        return f"{self.private}/events"
+    constraint_forces = _private_topic("constraint_forces")
+    energy = _private_topic("energy")
+    markers = _private_topic("markers")
+    events = _private_topic("events")
 
     def wrench(self, closure: str) -> str:
         """``<namespace>/<node>/closures/<closure>/wrench``."""

@@ -28,42 +28,30 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray
 
 from vjm_ros.control import ClosedChainModel, InfeasibleEffortsError
 from vjm_ros.control.paths import PATHS
 from vjm_ros.core.errors import VjmError
+from vjm_ros.ros.controller_base import ControllerNode
 from vjm_ros.ros.conversions import joint_arrays, seconds
 from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.ros.scene_client import wait_for_scene_description
 
 
-class ComputedTorqueNode(Node):
+class ComputedTorqueNode(ControllerNode):
     """Task-space computed torque (see the module documentation)."""
 
     def __init__(self, *, context=None, parameter_overrides=None):
-        super().__init__("vjm_ct_controller", context=context,
-                         parameter_overrides=parameter_overrides)
-        declare = self.declare_parameter
-        p = {
-            "scene": declare("scene", "").value,
-            "simulator": declare("simulator", "vjm_sim_node").value,
-            "path": declare("path", "circle").value,
-            "size": declare("size", 0.05).value,
-            "period": declare("period", 2.0).value,
-            "approach_time": declare("approach_time", 1.0).value,
-            "kp": declare("kp", 400.0).value,
-            "kd": declare("kd", 40.0).value,
-            "preload": declare("preload", 0.0).value,
-            "point": declare("point", "").value,
-            "description_timeout": declare("description_timeout", 10.0).value,
-            "closure_tolerance": declare("closure_tolerance", 1e-2).value,
-        }
+        super().__init__("vjm_ct_controller", {
+            "scene": "", "simulator": "vjm_sim_node", "path": "circle", "size": 0.05,
+            "period": 2.0, "approach_time": 1.0, "kp": 400.0, "kd": 40.0, "preload": 0.0,
+            "point": "", "description_timeout": 10.0, "closure_tolerance": 1e-2,
+        }, context=context, parameter_overrides=parameter_overrides)
+        p = self.params
         if p["path"] not in PATHS:
             raise ValueError(f"path: expected one of {sorted(PATHS)}, found {p['path']!r}")
-        self.params = p
         text = wait_for_scene_description(self, p["simulator"], p["description_timeout"])
         kwargs = {"closure_tolerance": p["closure_tolerance"]}
         if text is not None:
@@ -79,19 +67,10 @@ class ComputedTorqueNode(Node):
         self.point = p["point"] or model.points[0].name
         self.path = None
         self.t0 = 0.0
-        self.restart = False
-        self.publisher = self.create_publisher(
-            Float64MultiArray, f"{p['simulator']}/effort_commands", 10)
-        self.create_subscription(JointState, "joint_states", self.on_joint_state, 1)
-        self.create_subscription(String, f"{p['simulator']}/events", self.on_event, 10)
+        self.connect(p["simulator"])
         self.get_logger().info(
             f"{model.name} from {origin}: {p['path']} of {p['size']} m for {self.point}, "
             f"{model.actuator_names} -> {self.publisher.topic_name}")
-
-    def on_event(self, msg: String) -> None:
-        """Start the path over at the next state after the simulator's reset."""
-        if msg.data.startswith("reset:"):
-            self.restart = True
 
     def on_joint_state(self, msg: JointState) -> None:
         """One command per joint state."""

@@ -43,14 +43,14 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray
 
 from vjm_ros.core.compiled import make_mechanism
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.kinematics import forward_kinematics
 from vjm_ros.core.model import HINGE, Model
+from vjm_ros.ros.controller_base import ControllerNode
 from vjm_ros.ros.conversions import joint_arrays, seconds
 from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.scene.loader import load_scene
@@ -302,7 +302,7 @@ def tip_position(model: Model, q: np.ndarray) -> np.ndarray:
 # 4. The ROS node: joint states in, effort commands out (keep this part for your controller)
 # ---------------------------------------------------------------------------------------------
 
-class PdControllerNode(Node):
+class PdControllerNode(ControllerNode):
     """Subscribes ``joint_states``, publishes ``<simulator>/effort_commands``.
 
     Topic names are relative, so a namespace (``-r __ns:=/robot1``) or a remap places the
@@ -318,32 +318,18 @@ class PdControllerNode(Node):
     """
 
     def __init__(self, *, context=None, parameter_overrides=None):
-        super().__init__("vjm_pd_controller", context=context,
-                         parameter_overrides=parameter_overrides)
-        p = {
-            "scene": self.declare_parameter("scene", "five_bar").value,
-            "simulator": self.declare_parameter("simulator", "vjm_sim_node").value,
-            "center_x": self.declare_parameter("center_x", 0.7071).value,
-            "center_y": self.declare_parameter("center_y", 0.5).value,
-            "radius": self.declare_parameter("radius", 0.1).value,
-            "period": self.declare_parameter("period", 2.0).value,
-            "approach_time": self.declare_parameter("approach_time", 1.0).value,
-            "kp": self.declare_parameter("kp", 150.0).value,
-            "kd": self.declare_parameter("kd", 8.0).value,
-        }
-        self.params = p
+        super().__init__("vjm_pd_controller", {
+            "scene": "five_bar", "simulator": "vjm_sim_node", "center_x": 0.7071,
+            "center_y": 0.5, "radius": 0.1, "period": 2.0, "approach_time": 1.0, "kp": 150.0,
+            "kd": 8.0,
+        }, context=context, parameter_overrides=parameter_overrides)
+        p = self.params
         self.model = load_scene(p["scene"]).model
         FiveBarGeometry.from_model(self.model)  # refuse a scene that is not a five-bar, now
         self.law: PdGravityLaw | None = None
         self.t0 = 0.0
         self.last_t = -math.inf
-        self.restart = False
-        topic = f"{p['simulator']}/effort_commands"
-        self.publisher = self.create_publisher(Float64MultiArray, topic, 10)
-        # Depth 1: when a state arrives before the previous one was handled, only the newest
-        # counts (a controller that falls behind skips states instead of acting on old ones).
-        self.create_subscription(JointState, "joint_states", self.on_joint_state, 1)
-        self.create_subscription(String, f"{p['simulator']}/events", self.on_event, 10)
+        topic = self.connect(p["simulator"])
         self.get_logger().info(
             f"tracking a circle of radius {p['radius']} m around ({p['center_x']}, "
             f"{p['center_y']}) m every {p['period']} s; commands on {topic}")
@@ -365,11 +351,6 @@ class PdControllerNode(Node):
         tau = self.law.efforts(t - self.t0, q, qd)
         self.publisher.publish(Float64MultiArray(data=tau.tolist()))
 
-
-    def on_event(self, msg: String) -> None:
-        """Start the motion over at the next state after the simulator's reset."""
-        if msg.data.startswith("reset:"):
-            self.restart = True
 
 
 def main(args: list[str] | None = None) -> int:

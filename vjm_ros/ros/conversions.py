@@ -219,15 +219,10 @@ def markers(
 
     Parameters
     ----------
-    sample : Sample
-        ``segments`` (n, 2, 2), ``points`` (n_points, 2), ``closure_points`` (k, 2),
-        ``closure_force`` (k, 3).
+    sample, trace, force_scale
+        As in :func:`~vjm_ros.logs.messages.marker_specs`.
     t : float
         Stamp, simulated s.
-    trace : iterable of ndarray, shape (m, 2)
-        Recent tip positions, m.
-    force_scale : float
-        Arrow length per newton, m/N.
     """
     when = stamp(t)
     specs = layouts.marker_specs(sample, force_scale, trace=list(trace))

@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -101,26 +102,19 @@ class SimulationSettings:
         return self
 
 
+#: The settings a user gives on the command line, as node parameters or in a sweep.
+USER_SETTINGS = ("integrator", "closure", "rate", "substeps", "kp", "kv", "omega_n", "zeta",
+                 "alpha", "beta", "projection", "rtol", "atol")
+
+
 def resolve_settings(
     defaults: dict,
     gains: dict,
     *,
-    integrator: str | None = None,
-    closure: str | None = None,
-    rate: float | None = None,
-    substeps: int | None = None,
-    kp: float | None = None,
-    kv: float | None = None,
-    omega_n: float | None = None,
-    zeta: float | None = None,
-    alpha: float | None = None,
-    beta: float | None = None,
-    projection: bool | None = None,
-    rtol: float | None = None,
-    atol: float | None = None,
     kernel: str = "auto",
     check_stiffness: bool = True,
     flag: Callable[[str], str] = str,
+    **given: Any,
 ) -> SimulationSettings:
     """Settings from the values a user gave (None: not given) and the scene's defaults.
 
@@ -130,11 +124,15 @@ def resolve_settings(
         The scene's run defaults (``integrator``, ``rate``, ``substeps``) and closure method and
         gains (``method``, ``alpha``, ``beta``, ``projection``; the penalty gains of the scene
         are applied by the simulator when none are given here).
-    integrator, closure, rate, substeps, kp, kv, omega_n, zeta, alpha, beta, projection, rtol, \
-atol, kernel, check_stiffness
-        As in :class:`SimulationSettings`; rate in Hz, gains in N/m, N s/m, rad/s, 1/s.
+    kernel, check_stiffness
+        As in :class:`SimulationSettings`.
     flag : callable
         How a setting is named in error messages (``--omega-n`` for the command line).
+    **given
+        Any of the user-settable fields of :class:`SimulationSettings` (``integrator``,
+        ``closure``, ``rate``, ``substeps``, ``kp``, ``kv``, ``omega_n``, ``zeta``, ``alpha``,
+        ``beta``, ``projection``, ``rtol``, ``atol``); None or absent: not given. Rate in Hz,
+        gains in N/m, N s/m, rad/s, 1/s.
 
     Returns
     -------
@@ -144,7 +142,14 @@ atol, kernel, check_stiffness
     ------
     ConfigurationError
         Raw and modal gains together, or a damping without a stiffness.
+    TypeError
+        A keyword that is not a user-settable setting.
     """
+    unknown = sorted(set(given) - set(USER_SETTINGS))
+    if unknown:
+        raise TypeError(f"resolve_settings: unknown settings {unknown}; known: {USER_SETTINGS}")
+    g = {k: v for k, v in given.items() if v is not None}
+    kp, kv, omega_n, zeta = (g.get(k) for k in ("kp", "kv", "omega_n", "zeta"))
     if (kp is not None or kv is not None) and (omega_n is not None or zeta is not None):
         raise ConfigurationError(
             f"give either {flag('kp')}/{flag('kv')} or {flag('omega_n')}/{flag('zeta')}, not both"
@@ -153,20 +158,19 @@ atol, kernel, check_stiffness
         raise ConfigurationError(f"{flag('kv')} needs {flag('kp')}")
     if zeta is not None and omega_n is None:
         raise ConfigurationError(f"{flag('zeta')} needs {flag('omega_n')}")
-    given = {"rtol": rtol, "atol": atol}  # None: the dataclass defaults
     return SimulationSettings(
-        integrator=integrator or defaults.get("integrator", "rk4"),
-        closure=closure or gains.get("method", "penalty"),
-        rate=float(rate if rate is not None else defaults.get("rate", 1000.0)),
-        substeps=int(substeps if substeps is not None else defaults.get("substeps", 1)),
+        integrator=g.get("integrator") or defaults.get("integrator", "rk4"),
+        closure=g.get("closure") or gains.get("method", "penalty"),
+        rate=float(g.get("rate", defaults.get("rate", 1000.0))),
+        substeps=int(g.get("substeps", defaults.get("substeps", 1))),
         kp=kp,
         kv=kv if kv is not None else (0.0 if kp is not None else None),
         omega_n=omega_n,
         zeta=zeta if zeta is not None else (1.0 if omega_n is not None else None),
-        alpha=alpha if alpha is not None else gains.get("alpha"),
-        beta=beta if beta is not None else gains.get("beta"),
-        projection=bool(projection if projection is not None else gains.get("projection", False)),
+        alpha=g.get("alpha", gains.get("alpha")),
+        beta=g.get("beta", gains.get("beta")),
+        projection=bool(g.get("projection", gains.get("projection", False))),
         kernel=kernel,
         check_stiffness=check_stiffness,
-        **{k: v for k, v in given.items() if v is not None},
+        **{k: g[k] for k in ("rtol", "atol") if k in g},
     )

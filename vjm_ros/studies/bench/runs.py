@@ -142,20 +142,20 @@ class RowResult:
     settings: dict
     status: str = OK
     message: str = ""
-    diverged_at: float | None = None
-    wall_per_sim_s: float | None = None
+    diverged_at: float | None = None  # simulated s
+    wall_per_sim_s: float | None = None  # wall s per simulated s (median of the samples)
     wall_samples: list = field(default_factory=list)
-    cpu_per_sim_s: float | None = None
+    cpu_per_sim_s: float | None = None  # CPU s per simulated s
     cpu_samples: list = field(default_factory=list)
-    realtime_factor: float | None = None
-    steps_per_s: float | None = None
-    evaluations_per_sim_s: float | None = None
-    max_closure_error: float | None = None
-    rms_closure_error: float | None = None
-    energy_drift: float | None = None
-    energy_balance_residual: float | None = None
-    tip_deviation: float | None = None
-    position_deviation: float | None = None
+    realtime_factor: float | None = None  # simulated s per wall s
+    steps_per_s: float | None = None  # integrator steps per wall s
+    evaluations_per_sim_s: float | None = None  # right-hand sides per simulated s
+    max_closure_error: float | None = None  # m
+    rms_closure_error: float | None = None  # m
+    energy_drift: float | None = None  # of the largest kinetic energy
+    energy_balance_residual: float | None = None  # J
+    tip_deviation: float | None = None  # m, from the reference run
+    position_deviation: float | None = None  # m, tips and link ends
     finite: bool | None = None
 
     @property
@@ -204,14 +204,12 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     pts = np.zeros((ticks + 1,) + p0.shape)
     ends = np.zeros((ticks + 1,) + e0.shape)
     pts[0], ends[0] = p0, e0
-    wall = cpu = 0.0
+    clock = _Clock()
     evals0 = sim.mechanism.evaluations
     try:
         for i in range(ticks):
-            w0, c0 = time.perf_counter(), time.process_time()
-            sim.advance()
-            wall += time.perf_counter() - w0
-            cpu += time.process_time() - c0
+            with clock:
+                sim.advance()
             traj.append(sim.sample())
             pts[i + 1], ends[i + 1] = _positions(scene.model, sim.q)
     except DivergenceError as exc:
@@ -223,16 +221,34 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
         return res
     evals = sim.mechanism.evaluations - evals0 - ticks  # sample() evaluates once per tick
     summary = traj.summary()
-    res.wall_samples = [wall / horizon]
-    res.cpu_samples = [cpu / horizon]
-    res.cpu_per_sim_s = cpu / horizon
+    clock.record(res, horizon, ticks * (cfg.substeps if not cfg.adaptive else 1))
     res.evaluations_per_sim_s = evals / horizon
-    res.steps_per_s = (ticks * (cfg.substeps if not cfg.adaptive else 1)) / wall if wall > 0 else None
     for k in ("max_closure_error", "rms_closure_error", "energy_drift", "energy_balance_residual",
               "finite"):
         setattr(res, k, summary[k])
     _deviation(res, ref, cfg.rate, ticks, pts, ends)
     return res
+
+
+class _Clock:
+    """Wall and CPU time (s) spent inside ``with clock:`` blocks, summed."""
+
+    def __init__(self) -> None:
+        self.wall = self.cpu = 0.0
+
+    def __enter__(self) -> None:
+        self._w, self._c = time.perf_counter(), time.process_time()
+
+    def __exit__(self, *exc) -> None:
+        self.wall += time.perf_counter() - self._w
+        self.cpu += time.process_time() - self._c
+
+    def record(self, res: RowResult, horizon: float, steps: int) -> None:
+        """Store the per-simulated-second costs (s/s) and the step rate (1/s) of ``res``."""
+        res.wall_samples = [self.wall / horizon]
+        res.cpu_samples = [self.cpu / horizon]
+        res.cpu_per_sim_s = self.cpu / horizon
+        res.steps_per_s = steps / self.wall if self.wall > 0 else None
 
 
 def _deviation(res: RowResult, ref: Reference | None, rate: float, ticks: int,
@@ -287,15 +303,13 @@ def run_mujoco(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | No
         energy[i] = sim.energy()
         power[i] = sim.power_in()
 
-    wall = cpu = 0.0
+    clock = _Clock()
     with sim:
         sample(0)
         try:
             for i in range(ticks):
-                w0, c0 = time.perf_counter(), time.process_time()
-                sim.step_tick()
-                wall += time.perf_counter() - w0
-                cpu += time.process_time() - c0
+                with clock:
+                    sim.step_tick()
                 sim.ticks += 1
                 sim.t = sim.ticks * sim.dt
                 sim.check()
@@ -307,10 +321,7 @@ def run_mujoco(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | No
     tv = energy.sum(axis=1)
     kin_max = float(energy[:, 0].max())
     work = np.concatenate(([0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) / cfg.rate)))
-    res.wall_samples = [wall / horizon]
-    res.cpu_samples = [cpu / horizon]
-    res.cpu_per_sim_s = cpu / horizon
-    res.steps_per_s = ticks * cfg.substeps / wall if wall > 0 else None
+    clock.record(res, horizon, ticks * cfg.substeps)
     res.max_closure_error = float(closure.max())
     res.rms_closure_error = float(np.sqrt(np.mean(closure**2)))
     res.energy_drift = float(np.max(np.abs(tv - tv[0])) / kin_max) if kin_max > 0 else 0.0
