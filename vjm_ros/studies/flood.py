@@ -292,24 +292,16 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             output: list[str] = []
             reader = threading.Thread(target=lambda: output.extend(node.stdout), daemon=True)
             reader.start()
-            start = time.monotonic()
-            while states[0] == 0:
-                if node.poll() is not None or time.monotonic() - start > 60.0:
-                    raise RuntimeError("the node did not start:\n" + "".join(output))
-                time.sleep(0.01)
+            _wait_for_first_state(node, states, output)
             flooder = subprocess.Popen(
                 [sys.executable, "-m", "vjm_ros.studies.flood", "--publish", "--scene", scene,
                  "--flood-hz", str(flood_hz), "--seconds", str(seconds), "--seed", str(seed),
                  "--out", str(sent_file)],
                 env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-            memory = []
-            while flooder.poll() is None and node.poll() is None:
-                memory.append((time.monotonic(), rss_mb(node.pid)))
-                time.sleep(0.25)
+            memory = _sample_memory(node, flooder)
             flood_out = flooder.communicate(timeout=60.0)[0]
             if flooder.returncode != 0:
                 raise RuntimeError(f"the flooder failed ({flooder.returncode}):\n{flood_out}")
-            memory.append((time.monotonic(), rss_mb(node.pid)))
             node.wait(timeout=duration + 60.0)
         finally:
             _reap((flooder, node), reader)
@@ -321,6 +313,26 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
     row["states_seen"] = states[0]
     row["load_1min_end"] = os.getloadavg()[0]
     return row
+
+
+def _wait_for_first_state(node: subprocess.Popen, states: list, output: list[str]) -> None:
+    """Return once the probe has counted a state; raise with the node's output if it died or
+    stayed silent for 60 s."""
+    start = time.monotonic()
+    while states[0] == 0:
+        if node.poll() is not None or time.monotonic() - start > 60.0:
+            raise RuntimeError("the node did not start:\n" + "".join(output))
+        time.sleep(0.01)
+
+
+def _sample_memory(node: subprocess.Popen, flooder: subprocess.Popen) -> list:
+    """``(monotonic s, node RSS MB)`` every 0.25 s while both processes run."""
+    memory = []
+    while flooder.poll() is None and node.poll() is None:
+        memory.append((time.monotonic(), rss_mb(node.pid)))
+        time.sleep(0.25)
+    memory.append((time.monotonic(), rss_mb(node.pid)))
+    return memory
 
 
 def _reap(procs, reader: threading.Thread | None) -> None:

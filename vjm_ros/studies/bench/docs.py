@@ -202,9 +202,9 @@ def live_table(rows: dict[str, list[RowResult]]) -> list[str]:
     return lines
 
 
-def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
+def _thesis_findings(vjm_rows: list[RowResult]) -> list[str]:
+    """The thesis gains and exact rk4 at 1 kHz."""
     out = []
-    vjm_rows = [r for rs in rows.values() for r in rs if r.engine == "vjm"]
     thesis = [r for r in vjm_rows if r.closure == THESIS.label and r.ok and r.step is not None]
     exact = [r for r in vjm_rows if r.closure == EXACT.label and r.ok and r.step is not None]
     if thesis:
@@ -225,6 +225,12 @@ def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
             text += (f" Exact closure with rk4 at 1 kHz reaches position errors of "
                      f"{_e(min(rk4))}–{_e(max(rk4))} m on the same scenes.")
         out.append(text)
+    return out
+
+
+def _exact_findings(vjm_rows: list[RowResult]) -> list[str]:
+    """Worst errors of the exact closures at 1 kHz."""
+    out = []
     for lab in (EXACT.label, EXACT_PROJ.label):
         for integ in ("semi_implicit_euler", "rk4"):
             rs = [r for r in vjm_rows if r.closure == lab and r.integrator == integ and r.ok
@@ -234,6 +240,12 @@ def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
                            f"{_e(_worst(rs, 'max_closure_error'))} m, position error at most "
                            f"{_e(_worst(rs, 'position_deviation'))} m, energy drift at most "
                            f"{_e(_worst(rs, 'energy_drift'))}, over the scenes.")
+    return out
+
+
+def _guard_findings(vjm_rows: list[RowResult]) -> list[str]:
+    """Rows refused by the stiffness check or stopped by the divergence guard."""
+    out = []
     refused: dict[str, int] = {}
     for r in vjm_rows:
         if r.status == REFUSED:
@@ -256,6 +268,12 @@ def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
                    + (" The stiffness check judges the coupled closure modes at the initial "
                       "pose; these stiffened as the pose moved, and the guard caught them."
                       if all(r.closure.startswith("penalty") for r in div) else ""))
+    return out
+
+
+def _mujoco_findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
+    """Cost ratios against MuJoCo at matched accuracy, per scene."""
+    out = []
     for name in rows:
         match = [m for m in results["scenes"][name].get("matched_accuracy", [])
                  if m["ratio"] is not None]
@@ -275,6 +293,12 @@ def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
                     f"ms per simulated second) and {lv['mujoco']['label']} "
                     f"({_e(lv['mujoco']['position_deviation'])} m, "
                     f"{_ms(lv['mujoco']['wall_per_sim_s'])} ms).")
+    return out
+
+
+def _scaling_findings(results: dict) -> list[str]:
+    """Compiled against numpy kernel, and growth of the cost per tick."""
+    out = []
     if "scaling" in results:
         sc = results["scaling"]
         ratios = []
@@ -295,7 +319,13 @@ def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
             out.append(f"- **Cost per tick {what}** grows roughly as "
                        + ", ".join(f"n^{v:.2f} ({k})" for k, v in g.items() if v is not None)
                        + " for n >= 4 coordinates (see the scaling section).")
-    return out + [""]
+    return out
+
+
+def _findings(results: dict, rows: dict[str, list[RowResult]]) -> list[str]:
+    vjm_rows = [r for rs in rows.values() for r in rs if r.engine == "vjm"]
+    return (_thesis_findings(vjm_rows) + _exact_findings(vjm_rows) + _guard_findings(vjm_rows)
+            + _mujoco_findings(results, rows) + _scaling_findings(results) + [""])
 
 
 def _extremes_text() -> list[str]:

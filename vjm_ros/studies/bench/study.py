@@ -80,6 +80,75 @@ def horizon_for(name: str, quick: bool, override: float | None = None) -> float:
     return min(h, QUICK_HORIZON) if quick else h
 
 
+def _plan(opts: BenchOptions, grid, scenes: list, use_mujoco: bool) -> tuple[list, float]:
+    """``(scene, horizon, rows)`` per scene, and the total work for the progress bar."""
+    plan = []
+    total = 0.0
+    for sc in scenes:
+        horizon = horizon_for(sc.name, opts.quick, opts.horizon)
+        rows = grid_rows(grid, use_mujoco and sc.name in MUJOCO_SCENES, opts.extra)
+        plan.append((sc, horizon, rows))
+        total += 2 * 6000.0 * horizon  # reference and its check
+        for cfg in rows:
+            total += _work(cfg, horizon, sc.model.n) * (1 + max(opts.repeats - 1, 0))
+    if opts.scaling:
+        for family, sizes in (("links", grid.scaling_links), ("chains", grid.scaling_chains)):
+            for size in sizes:
+                n = size if family == "links" else 2 * size
+                for integ, _ in SCALING_METHODS:
+                    stages = 4.0 if integ == "rk4" else 1.0
+                    total += stages * (grid.scaling_ticks + 1) * max(opts.repeats, 1) * (1 + n / 8)
+    return plan, total
+
+
+def _kernel_name(scenes: list, opts: BenchOptions) -> str | None:
+    """The kernel the rows run on (``numba`` or ``numpy``), from a probe simulator."""
+    if not scenes:
+        return None
+    try:
+        probe = Simulator(scenes[0].model, SimulationSettings(
+            integrator="rk4", closure="exact", **opts.extra), scenes[0].gains)
+        return probe.describe().get("kernel", "numpy")
+    except (VjmError, TypeError):
+        return None
+
+
+def _scene_rows(sc, horizon: float, rows: list, ref, engine, progress, repeats: int) -> list:
+    """Every row of one scene (on the engine's workers when there is one), then the timing
+    repeats in this process, one after another."""
+    out_rows = []
+    runners = [run_mujoco if cfg.engine == "mujoco" else run_vjm for cfg in rows]
+    if engine is not None:
+        futures = [engine.client.submit(run, sc, cfg, horizon, ref, pure=False)
+                   for run, cfg in zip(runners, rows, strict=True)]
+    for i, cfg in enumerate(rows):
+        res = futures[i].result() if engine is not None else runners[i](sc, cfg, horizon, ref)
+        out_rows.append(res)
+        progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: {cfg.label()}")
+    for _ in range(max(repeats - 1, 0)):
+        for cfg, res in zip(rows, out_rows, strict=True):
+            if res.ok:
+                timer = _time_mujoco if cfg.engine == "mujoco" else _time_vjm
+                try:
+                    wall_s, cpu_s = timer(sc, cfg, horizon)
+                    res.wall_samples.append(wall_s)
+                    res.cpu_samples.append(cpu_s)
+                except (VjmError, np.linalg.LinAlgError, FloatingPointError) as exc:
+                    res.message = f"a timing repeat failed: {exc}"
+            progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: timing {cfg.label()}")
+    for res in out_rows:
+        _finish_timing(res)
+    return out_rows
+
+
+def _cpu_share(all_rows: dict) -> float | None:
+    """CPU time over wall time of every timed row (below 1: the machine was shared)."""
+    timed = [r for rs in all_rows.values() for r in rs
+             if r.ok and len(r.cpu_samples) == len(r.wall_samples)]
+    wall = sum(sum(r.wall_samples) for r in timed)
+    return sum(sum(r.cpu_samples) for r in timed) / wall if wall > 0 else None
+
+
 def run_bench(opts: BenchOptions) -> dict:
     """Run the study and write the outputs.
 
@@ -97,33 +166,9 @@ def run_bench(opts: BenchOptions) -> dict:
     from vjm_ros.studies.compare_mujoco import mujoco_version, version_note
 
     mj_version = mujoco_version() if opts.mujoco else None
-    mj_note = version_note(mj_version)
     scenes = [load_scene(s) for s in opts.scenes]
-    plan = []
-    total = 0.0
-    for sc in scenes:
-        horizon = horizon_for(sc.name, opts.quick, opts.horizon)
-        use_mj = bool(mj_version) and sc.name in MUJOCO_SCENES
-        rows = grid_rows(grid, use_mj, opts.extra)
-        plan.append((sc, horizon, rows))
-        total += 2 * 6000.0 * horizon  # reference and its check
-        for cfg in rows:
-            total += _work(cfg, horizon, sc.model.n) * (1 + max(opts.repeats - 1, 0))
-    if opts.scaling:
-        for family, sizes in (("links", grid.scaling_links), ("chains", grid.scaling_chains)):
-            for size in sizes:
-                n = size if family == "links" else 2 * size
-                for integ, _ in SCALING_METHODS:
-                    stages = 4.0 if integ == "rk4" else 1.0
-                    total += stages * (grid.scaling_ticks + 1) * max(opts.repeats, 1) * (1 + n / 8)
-    kernel = None
-    if scenes:
-        try:
-            probe = Simulator(scenes[0].model, SimulationSettings(
-                integrator="rk4", closure="exact", **opts.extra), scenes[0].gains)
-            kernel = probe.describe().get("kernel", "numpy")
-        except (VjmError, TypeError):
-            kernel = None
+    plan, total = _plan(opts, grid, scenes, bool(mj_version))
+    kernel = _kernel_name(scenes, opts)
     progress = BenchProgress(total, enabled=opts.progress)
     started = time.perf_counter()
     engine = None
@@ -131,10 +176,8 @@ def run_bench(opts: BenchOptions) -> dict:
         from vjm_ros.studies.sweep.engine import Engine  # the sweep engine, on Dask
 
         engine = Engine(opts.cluster, opts.workers).__enter__()
-    results: dict = {
-        "meta": {**_meta(opts, threads, mj_version, mj_note, grid), "kernel": kernel},
-        "scenes": {},
-    }
+    meta = _meta(opts, threads, mj_version, version_note(mj_version), grid)
+    results: dict = {"meta": {**meta, "kernel": kernel}, "scenes": {}}
     all_rows: dict[str, list[RowResult]] = {}
     try:
         for sc, horizon, rows in plan:
@@ -145,34 +188,8 @@ def run_bench(opts: BenchOptions) -> dict:
             except (VjmError, np.linalg.LinAlgError) as exc:
                 ref, ref_info = None, {"error": str(exc)}
             progress.advance(2 * 6000.0 * horizon, f"{sc.name}: reference done")
-            out_rows = []
-            runners = [run_mujoco if cfg.engine == "mujoco" else run_vjm for cfg in rows]
-            if engine is not None:
-                futures = [engine.client.submit(run, sc, cfg, horizon, ref, pure=False)
-                           for run, cfg in zip(runners, rows, strict=True)]
-            for i, cfg in enumerate(rows):
-                if engine is not None:
-                    res = futures[i].result()
-                else:
-                    res = runners[i](sc, cfg, horizon, ref)
-                out_rows.append(res)
-                progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: {cfg.label()}")
-            for _ in range(max(opts.repeats - 1, 0)):
-                for cfg, res in zip(rows, out_rows, strict=True):
-                    if res.ok:
-                        timer = _time_mujoco if cfg.engine == "mujoco" else _time_vjm
-                        try:
-                            wall_s, cpu_s = timer(sc, cfg, horizon)
-                            res.wall_samples.append(wall_s)
-                            res.cpu_samples.append(cpu_s)
-                        except (VjmError, np.linalg.LinAlgError, FloatingPointError) as exc:
-                            res.message = f"a timing repeat failed: {exc}"
-                    progress.advance(_work(cfg, horizon, sc.model.n),
-                                     f"{sc.name}: timing {cfg.label()}")
-            for res in out_rows:
-                _finish_timing(res)
-            all_rows[sc.name] = out_rows
-            results["scenes"][sc.name] = _scene_summary(sc, horizon, ref_info, out_rows)
+            all_rows[sc.name] = _scene_rows(sc, horizon, rows, ref, engine, progress, opts.repeats)
+            results["scenes"][sc.name] = _scene_summary(sc, horizon, ref_info, all_rows[sc.name])
         if opts.scaling:
             results["scaling"] = run_scaling(grid, opts.repeats, progress, opts.extra)
     finally:
@@ -180,11 +197,7 @@ def run_bench(opts: BenchOptions) -> dict:
         if engine is not None:
             engine.__exit__(None, None, None)
     results["recommended"] = recommend_overall(all_rows) if all_rows else {}
-    cpu = sum(sum(r.cpu_samples) for rs in all_rows.values() for r in rs
-              if r.ok and len(r.cpu_samples) == len(r.wall_samples))
-    wall = sum(sum(r.wall_samples) for rs in all_rows.values() for r in rs
-               if r.ok and len(r.cpu_samples) == len(r.wall_samples))
-    results["meta"]["cpu_share"] = cpu / wall if wall > 0 else None
+    results["meta"]["cpu_share"] = _cpu_share(all_rows)
     results["meta"]["bench_wall_time"] = time.perf_counter() - started
     long_runs = _long_runs(opts.out)
     if long_runs:

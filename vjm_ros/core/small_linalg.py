@@ -1,0 +1,184 @@
+"""Small dense linear algebra for the compiled kernels: LU with partial pivoting and the
+minimum-norm closure correction, written as loops so that numba compiles them without LAPACK
+calls (matrices here are a few rows: a call into LAPACK would cost more than the arithmetic).
+"""
+
+from __future__ import annotations
+
+import math
+
+from vjm_ros.core.jit import jit as _jit
+
+
+@_jit
+def lu_factor(a, piv):
+    """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``).
+
+    Returns
+    -------
+    int
+        0, or 1 when a pivot is exactly zero (singular matrix).
+    """
+    n = a.shape[0]
+    status = 0
+    for k in range(n):
+        p = k
+        big = abs(a[k, k])
+        for i in range(k + 1, n):
+            v = abs(a[i, k])
+            if v > big:
+                big = v
+                p = i
+        piv[k] = p
+        if p != k:
+            for j in range(n):
+                t = a[k, j]
+                a[k, j] = a[p, j]
+                a[p, j] = t
+        d = a[k, k]
+        if d == 0.0:
+            status = 1
+            continue
+        inv = 1.0 / d
+        for i in range(k + 1, n):
+            a[i, k] *= inv
+            f = a[i, k]
+            if f != 0.0:
+                for j in range(k + 1, n):
+                    a[i, j] -= f * a[k, j]
+    return status
+
+
+@_jit
+def lu_solve(a, piv, b):
+    """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor`'s output."""
+    n = a.shape[0]
+    for k in range(n):
+        p = piv[k]
+        if p != k:
+            t = b[k]
+            b[k] = b[p]
+            b[p] = t
+    for i in range(n):
+        s = b[i]
+        for j in range(i):
+            s -= a[i, j] * b[j]
+        b[i] = s
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for j in range(i + 1, n):
+            s -= a[i, j] * b[j]
+        b[i] = s / a[i, i]
+
+
+@_jit
+def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec):
+    """``M^-1 A^T lambda`` with ``lambda`` the minimum-norm solution of ``A M^-1 A^T lambda = c``.
+
+    ``A M^-1 A^T`` (symmetric positive semi-definite) is diagonalized by cyclic Jacobi rotations
+    (its lower triangle is read, as LAPACK's ``dsyevd`` with ``UPLO='L'``); eigenvalues below
+    ``rcond * max eigenvalue`` count as zero, as in :func:`vjm_ros.core.constraints.solve_multipliers`,
+    so a rank-deficient ``A`` gets no multiplier along the directions it does not constrain.
+
+    Parameters
+    ----------
+    lu, piv : ndarray
+        LU factors of ``M`` (:func:`lu_factor`).
+    jac : ndarray, shape (r, n)
+    c : ndarray, shape (r,)
+    rcond : float
+    out : ndarray, shape (n,)
+        Out: ``M^-1 A^T lambda``.
+    minv_at : ndarray, shape (n, r)
+        Scratch: ``M^-1 A^T``.
+    g, v : ndarray, shape (r, r)
+        Scratch: ``G``, eigenvectors.
+    vec : ndarray, shape (3, max(n, r))
+        Scratch; on return ``vec[0, :r]`` holds ``lambda``.
+    """
+    n = lu.shape[0]
+    r = c.shape[0]
+    col = vec[1]
+    for i in range(r):
+        for j in range(n):
+            col[j] = jac[i, j]
+        lu_solve(lu, piv, col[:n])
+        for j in range(n):
+            minv_at[j, i] = col[j]
+    for i in range(r):
+        for k in range(i + 1):
+            s = 0.0
+            for j in range(n):
+                s += jac[i, j] * minv_at[j, k]
+            g[i, k] = s
+            g[k, i] = s
+        for k in range(r):
+            v[i, k] = 0.0
+        v[i, i] = 1.0
+    # cyclic Jacobi; an off-diagonal entry below eps ||G||_F is set to zero (a change within the
+    # round-off of G itself), so the sweeps end once every entry is at that level
+    for _sweep in range(50):
+        fro = 0.0
+        for i in range(r):
+            for j in range(r):
+                fro += g[i, j] * g[i, j]
+        tiny = 2.220446049250313e-16 * math.sqrt(fro)
+        rotated = False
+        for p in range(r - 1):
+            for qq in range(p + 1, r):
+                apq = g[p, qq]
+                if not abs(apq) > tiny:
+                    g[p, qq] = 0.0
+                    g[qq, p] = 0.0
+                    continue
+                rotated = True
+                tau = (g[qq, qq] - g[p, p]) / (2.0 * apq)
+                if tau >= 0.0:
+                    t = 1.0 / (tau + math.sqrt(1.0 + tau * tau))
+                else:
+                    t = -1.0 / (-tau + math.sqrt(1.0 + tau * tau))
+                cr = 1.0 / math.sqrt(1.0 + t * t)
+                sr = t * cr
+                for k in range(r):
+                    gkp = g[k, p]
+                    gkq = g[k, qq]
+                    g[k, p] = cr * gkp - sr * gkq
+                    g[k, qq] = sr * gkp + cr * gkq
+                for k in range(r):
+                    gpk = g[p, k]
+                    gqk = g[qq, k]
+                    g[p, k] = cr * gpk - sr * gqk
+                    g[qq, k] = sr * gpk + cr * gqk
+                g[p, qq] = 0.0
+                g[qq, p] = 0.0
+                for k in range(r):
+                    vkp = v[k, p]
+                    vkq = v[k, qq]
+                    v[k, p] = cr * vkp - sr * vkq
+                    v[k, qq] = sr * vkp + cr * vkq
+        if not rotated:
+            break
+    wmax = g[0, 0]
+    for i in range(1, r):
+        wmax = max(wmax, g[i, i])
+    cut = rcond * max(wmax, 1e-300)
+    coef = vec[2]
+    for i in range(r):
+        if g[i, i] > cut:
+            s = 0.0
+            for k in range(r):
+                s += v[k, i] * c[k]
+            coef[i] = s / g[i, i]
+        else:
+            coef[i] = 0.0
+    lam = vec[0]
+    for k in range(r):
+        s = 0.0
+        for i in range(r):
+            s += v[k, i] * coef[i]
+        lam[k] = s
+    for j in range(n):
+        s = 0.0
+        for i in range(r):
+            s += minv_at[j, i] * lam[i]
+        out[j] = s
