@@ -468,6 +468,36 @@ class FastMechanism(Mechanism):
         return self._run(int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(steps))
 
 
+    def advance_observed(
+        self, method: int, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float,
+        substeps: int, project: bool, limit: float, lengths: np.ndarray, plink: np.ndarray,
+        plocal: np.ndarray, out: tuple[np.ndarray, ...],
+    ) -> tuple[int, int]:
+        """Control ticks in one compiled call, each observed (:func:`vjm_ros.core.pipeline.advance_ticks`).
+
+        As many ticks run as ``out`` has rows. ``evaluations`` counts what the tick-by-tick
+        path counts for the ticks that ran: the steps' stages and one evaluation per sample.
+
+        Returns
+        -------
+        done, code : int
+            Ticks that ran, and :data:`vjm_ros.core.pipeline.OK` or why tick ``done`` failed.
+        """
+        from vjm_ros.core import pipeline
+
+        if method not in _FIXED_METHODS:
+            raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
+        done, code = pipeline.advance_ticks(
+            int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
+            bool(project), float(limit),
+            (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par),
+            self._buffers, lengths, plink, plocal, out,
+        )
+        stages = 4 if method == K.RK4 else 1
+        self.evaluations += done * (stages * int(substeps) + 1)
+        return int(done), int(code)
+
+
 _FIXED_METHODS = (K.EXPLICIT_EULER, K.SEMI_IMPLICIT_EULER, K.RK4, K.IMPLICIT_EULER)
 
 

@@ -376,17 +376,28 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     int
         0, or 1 when a matrix was exactly singular.
     """
+    return step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
+                kin, mm, bias, cm, crow, jac, points, out_a, out_b,
+                workspace(q0.shape[0], crow.shape[0]))
+
+
+@_jit
+def workspace(n, r):
+    """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows."""
+    m = max(n, r)
+    return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
+            np.empty((r, r)), np.empty((3, m)), np.empty(r), np.empty(n), np.zeros((4, n)),
+            np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n))
+
+
+@_jit
+def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
+         kin, mm, bias, cm, crow, jac, points, out_a, out_b, work):
+    """:func:`run` with its scratch arrays given (``work``, from :func:`workspace`): no
+    allocation, for callers that run many ticks."""
     n = q0.shape[0]
     r = crow.shape[0]
-    m = max(n, r)
-    lu = np.empty((n, n))
-    piv = np.empty(n, dtype=np.int64)
-    minv_at = np.empty((n, r))
-    g = np.empty((r, r))
-    v = np.empty((r, r))
-    vec = np.empty((3, m))
-    rhs = np.empty(r)
-    corr = np.empty(n)
+    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero = work
     q = out_a
     qd = out_b
     for j in range(n):
@@ -397,12 +408,11 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     status = 0
 
     if not full:
-        terms(q, np.zeros(n), lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
+        terms(q, zero, lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
               points)
         return 0
 
     if op == PROJECT:
-        zero = np.zeros(n)
         for it in range(steps + 1):
             terms(q, zero, lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
                   points)
@@ -435,10 +445,8 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     single = op == EVALUATE or op == IMPLICIT_VELOCITY
     stages = 4 if op == RK4 else 1
     total = 1 if single else steps * stages
-    ks = np.zeros((4, n))  # stage accelerations
-    vs = np.zeros((4, n))  # stage velocities
-    qi = np.empty(n)
-    acc = out_a if single else np.empty(n)
+    # ks: stage accelerations, vs: stage velocities
+    acc = out_a if single else scratch
     for it in range(total):
         stage = it % stages
         if stage == 0:

@@ -80,6 +80,57 @@ class Sample:
         return float(self.closure_error.max()) if self.closure_error.size else 0.0
 
 
+_BLOCK_FIELDS = (
+    ("q", "q"), ("qd", "qd"), ("qdd", "qdd"), ("theta", "theta"), ("points", "points"),
+    ("force", "closure_force"), ("error", "closure_error"), ("cpoints", "closure_points"),
+    ("energy", "energy"), ("power", "power_in"), ("dissipation", "dissipation"),
+    ("segments", "segments"),
+)
+"""Arrays of a :class:`SampleBlock`, in the compiled pipeline's order, and the
+:class:`Sample` field each row of them gives."""
+
+
+class SampleBlock:
+    """The samples at the end of consecutive ticks, one row per tick (``len`` rows).
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Simulated time, s.
+    effort : ndarray, shape (n,)
+        Efforts held over the block, N m or N.
+    q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation, segments
+        As the fields of :class:`Sample`, with a leading tick axis (the layout of
+        :mod:`vjm_ros.core.pipeline`).
+    """
+
+    def __init__(self, model: Model, capacity: int):
+        n, k, p = model.n, len(model.closures), len(model.points)
+        shapes = {"q": (n,), "qd": (n,), "qdd": (n,), "theta": (n,), "points": (p, 2),
+                  "force": (k, 3), "error": (k,), "cpoints": (k, 2), "energy": (4,),
+                  "power": (), "dissipation": (), "segments": (n, 2, 2)}
+        self.arrays = tuple(np.zeros((capacity,) + shapes[key]) for key, _ in _BLOCK_FIELDS)
+        for (key, _), arr in zip(_BLOCK_FIELDS, self.arrays, strict=True):
+            setattr(self, key, arr)
+        self.t = np.zeros(capacity)
+        self.effort = np.zeros(n)
+        self.rows = 0
+
+    def __len__(self) -> int:
+        return self.rows
+
+    def put(self, i: int, s: Sample) -> None:
+        """Store sample ``s`` as row ``i``."""
+        self.t[i] = s.t
+        for key, attr in _BLOCK_FIELDS:
+            getattr(self, key)[i] = getattr(s, attr)
+
+    def sample(self, i: int) -> Sample:
+        """Row ``i`` as a :class:`Sample` of its own (copies: the block is refilled later)."""
+        return Sample(t=float(self.t[i]), effort=self.effort.copy(),
+                      **{attr: getattr(self, key)[i].copy() for key, attr in _BLOCK_FIELDS})
+
+
 class Simulator:
     """Fixed-rate simulation of one scene.
 
@@ -231,6 +282,61 @@ class Simulator:
             self.integrator.reset()
         self.q, self.qd = q, qd
         self._guard()
+
+    def advance_block(self, block: SampleBlock, ticks: int) -> None:
+        """``ticks`` control ticks with the efforts held, each sampled into ``block``.
+
+        The same states and samples as ``advance()`` then ``sample()`` per tick; with a compiled
+        fixed-step integrator all ticks run in one compiled call
+        (:func:`vjm_ros.core.pipeline.advance_ticks`), else tick by tick.
+
+        Parameters
+        ----------
+        block : SampleBlock
+            Receives rows ``0 .. ticks - 1`` (``block.rows`` is set to the rows filled).
+        ticks : int
+            At most the block's capacity.
+
+        Raises
+        ------
+        DivergenceError
+            As :meth:`advance`; the block then holds the ticks before the failing one.
+        """
+        block.effort = self.tau.copy()
+        block.rows = 0
+        method = getattr(self.integrator, "kernel_method", None)
+        if method is None or not hasattr(self.mechanism, "advance_observed") or ticks == 0:
+            self._advance_tick_by_tick(block, 0, ticks)
+            return
+        arrays = tuple(a[:ticks] for a in block.arrays)
+        project = (isinstance(self.method, ExactClosure) and self.method.projection
+                   and self.model.n_rows > 0)
+        limit = self.divergence_limit if (self.model.n_rows and self.divergence_limit) else np.inf
+        start = self.ticks
+        with np.errstate(all="ignore"):
+            done, code = self.mechanism.advance_observed(
+                method, self.q, self.qd, self.tau, self.h, self.settings.substeps, project, limit,
+                self.model.length, self._point_links, self._point_local, arrays)
+        # the states before the last ticks, for the diagnosis of a divergence
+        for i in range(max(done - self._history.maxlen, 0), done):
+            q, qd = (self.q, self.qd) if i == 0 else (block.q[i - 1], block.qd[i - 1])
+            self._history.append(((start + i) * self.dt, q.copy(), qd.copy()))
+        block.t[:done] = (start + 1 + np.arange(done)) * self.dt
+        block.rows = done
+        if done:
+            self.q, self.qd = block.q[done - 1].copy(), block.qd[done - 1].copy()
+        self.ticks = start + done
+        self.t = self.ticks * self.dt
+        if code:
+            # The failing tick again, tick by tick: it raises with the full diagnosis.
+            self._advance_tick_by_tick(block, done, ticks)
+
+    def _advance_tick_by_tick(self, block: SampleBlock, first: int, ticks: int) -> None:
+        """Rows ``first .. ticks - 1`` of ``block``, tick by tick."""
+        for i in range(first, ticks):
+            self.advance()
+            block.put(i, self.sample())
+            block.rows = i + 1
 
     def _guard(self) -> None:
         if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd))):

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from vjm_ros.core.model import ANGLE, Model
-from vjm_ros.sim.simulator import Sample
+from vjm_ros.sim.simulator import Sample, SampleBlock
 
 ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
 
@@ -63,16 +63,30 @@ class Trajectory:
     def __len__(self) -> int:
         return self._rows
 
-    def append(self, s: Sample) -> None:
-        """Store one sample."""
-        if self._rows == len(self._buf["t"]):
+    def _reserve(self, rows: int) -> None:
+        """Room for ``rows`` more samples (capacity doubles as needed)."""
+        while self._rows + rows > len(self._buf["t"]):
             for key, arr in self._buf.items():
                 self._buf[key] = np.concatenate((arr, np.zeros_like(arr)), axis=0)
+
+    def append(self, s: Sample) -> None:
+        """Store one sample."""
+        self._reserve(1)
         i = self._rows
         b = self._buf
         for key, attr in _SAMPLE_FIELDS:
             b[key][i] = getattr(s, attr)
         self._rows += 1
+
+    def extend(self, block: SampleBlock) -> None:
+        """Store every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` (copied; the block's
+        arrays carry the trajectory's column names)."""
+        rows = len(block)
+        self._reserve(rows)
+        i, b = self._rows, self._buf
+        for key, _ in _SAMPLE_FIELDS:
+            b[key][i : i + rows] = block.effort if key == "effort" else getattr(block, key)[:rows]
+        self._rows += rows
 
     def __getitem__(self, key: str) -> np.ndarray:
         """Stored array by name (``t``, ``q``, ``qd``, ``qdd``, ``effort``, ``theta``, ``points``,

@@ -16,7 +16,7 @@ from vjm_ros.core.errors import (
 )
 from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
 from vjm_ros.scene.loader import Scene
-from vjm_ros.sim.simulator import SimulationSettings, Simulator
+from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
 from vjm_ros.sim.trajectory import Trajectory
 from vjm_ros.studies.bench.grid import (
     CHECK_SETTINGS,
@@ -61,6 +61,10 @@ def _positions(model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     else:
         pts = np.zeros((0, 2))
     return pts, link_segments(model, kin)[:, 1]
+
+
+BLOCK_TICKS = 200
+"""Ticks per call when a row is run or timed: a whole-run cost, as ``vjm run`` pays it."""
 
 
 def _efforts(scene: Scene) -> np.ndarray:
@@ -187,7 +191,7 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     try:
         warm = _make_vjm(scene, cfg)  # a compiled kernel compiles here, not in the timed loop
         try:
-            warm.advance()
+            warm.advance_block(SampleBlock(scene.model, 1), 1)
         except (VjmError, np.linalg.LinAlgError, FloatingPointError):
             pass
         sim = _make_vjm(scene, cfg)
@@ -206,12 +210,17 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     pts[0], ends[0] = p0, e0
     clock = _Clock()
     evals0 = sim.mechanism.evaluations
+    block = SampleBlock(scene.model, BLOCK_TICKS)
     try:
-        for i in range(ticks):
-            with clock:
-                sim.advance()
-            traj.append(sim.sample())
-            pts[i + 1], ends[i + 1] = _positions(scene.model, sim.q)
+        while sim.ticks < ticks:
+            first = sim.ticks + 1
+            try:
+                with clock:
+                    sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
+            finally:
+                traj.extend(block)
+                for i in range(len(block)):
+                    pts[first + i], ends[first + i] = _positions(scene.model, block.q[i])
     except DivergenceError as exc:
         res.status, res.message, res.diverged_at = DIVERGED, str(exc), exc.time
         res.finite = False
@@ -219,7 +228,7 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     except (VjmError, np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
         res.status, res.message = FAILED, f"{type(exc).__name__}: {exc}"
         return res
-    evals = sim.mechanism.evaluations - evals0 - ticks  # sample() evaluates once per tick
+    evals = sim.mechanism.evaluations - evals0 - ticks  # a sample evaluates once per tick
     summary = traj.summary()
     clock.record(res, horizon, ticks * (cfg.substeps if not cfg.adaptive else 1))
     res.evaluations_per_sim_s = evals / horizon
@@ -265,10 +274,10 @@ def _deviation(res: RowResult, ref: Reference | None, rate: float, ticks: int,
 def _time_vjm(scene: Scene, cfg: RowConfig, horizon: float) -> tuple[float, float]:
     sim = _make_vjm(scene, cfg)
     ticks = int(round(horizon * cfg.rate))
-    advance = sim.advance
+    block = SampleBlock(scene.model, BLOCK_TICKS)
     t0, c0 = time.perf_counter(), time.process_time()
-    for _ in range(ticks):
-        advance()
+    while sim.ticks < ticks:
+        sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
     return (time.perf_counter() - t0) / horizon, (time.process_time() - c0) / horizon
 
 
@@ -335,10 +344,11 @@ def _time_mujoco(scene: Scene, cfg: RowConfig, horizon: float) -> tuple[float, f
     sim = _make_mujoco(scene, cfg)
     ticks = int(round(horizon * cfg.rate))
     with sim:
-        step = sim.step_tick
+        # Blocks of ticks in one call, as vjm's rows run (the efforts are held over the run).
+        mj, m, d = sim.mj, sim.m, sim.d
         t0, c0 = time.perf_counter(), time.process_time()
-        for _ in range(ticks):
-            step()
+        for start in range(0, ticks, BLOCK_TICKS):
+            mj.mj_step(m, d, nstep=min(BLOCK_TICKS, ticks - start) * sim.substeps)
         return (time.perf_counter() - t0) / horizon, (time.process_time() - c0) / horizon
 
 

@@ -1,0 +1,110 @@
+"""Blocks of ticks in one compiled call (:func:`vjm_ros.core.pipeline.advance_ticks`).
+
+Oracle: the tick-by-tick path (``Simulator.advance`` then ``Simulator.sample``), whose physics the
+rest of the suite checks against closed forms, energy and the numpy reference. The block path
+calls the same compiled step with the same arguments and sums the observables in the same order,
+so the comparison is exact (tolerance 0): any difference means the two paths no longer compute
+the same thing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vjm_ros.core.errors import DivergenceError
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.settings import SimulationSettings
+from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.trajectory import Trajectory
+
+pytest.importorskip("numba")
+
+SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "rrr_platform"]
+METHODS = [
+    {"integrator": "rk4", "closure": "exact"},
+    {"integrator": "rk4", "closure": "exact", "projection": True},
+    {"integrator": "semi_implicit_euler", "closure": "penalty"},
+    {"integrator": "implicit_euler", "closure": "penalty", "substeps": 2},
+    {"integrator": "explicit_euler", "closure": "exact", "substeps": 4},
+]
+FIELDS = ("q", "qd", "qdd", "effort", "theta", "points", "closure_force", "closure_error",
+          "closure_points", "energy", "power_in", "dissipation", "segments")
+
+
+def _pair(scene: str, **settings):
+    sc = load_scene(scene)
+    sims = [Simulator(sc.model, SimulationSettings(check_stiffness=False, **settings), sc.gains)
+            for _ in range(2)]
+    if sc.model.actuators:
+        for sim in sims:
+            sim.set_efforts([a.effort for a in sc.model.actuators])
+    return sc, sims
+
+
+@pytest.mark.parametrize("settings", METHODS, ids=lambda s: "-".join(map(str, s.values())))
+@pytest.mark.parametrize("scene", SCENES)
+def test_block_equals_tick_by_tick(scene, settings):
+    sc, (one, many) = _pair(scene, **settings)
+    ticks = 120
+    expected = []
+    for _ in range(ticks):
+        one.advance()
+        expected.append(one.sample())
+    block = SampleBlock(sc.model, 50)
+    got = []
+    while many.ticks < ticks:  # blocks of 50, 50 and 20: the state carries across calls
+        many.advance_block(block, min(50, ticks - many.ticks))
+        got += [block.sample(i) for i in range(len(block))]
+    assert len(got) == ticks
+    for e, g in zip(expected, got, strict=True):
+        assert g.t == e.t
+        for f in FIELDS:
+            np.testing.assert_array_equal(getattr(g, f), getattr(e, f), err_msg=f)
+    np.testing.assert_array_equal(many.q, one.q)
+    assert many.t == one.t and many.ticks == one.ticks
+    assert many.mechanism.evaluations == one.mechanism.evaluations
+
+
+@pytest.mark.parametrize("settings", [{"integrator": "rk45"}, {"kernel": "numpy"}])
+def test_block_falls_back_to_ticks_where_nothing_is_compiled(settings):
+    """Adaptive integrators and the numpy kernel fill the block tick by tick."""
+    sc, (one, many) = _pair("four_bar", closure="exact", **settings)
+    block = SampleBlock(sc.model, 20)
+    many.advance_block(block, 20)
+    for i in range(20):
+        one.advance()
+        np.testing.assert_array_equal(block.sample(i).q, one.sample().q)
+
+
+def test_divergence_inside_a_block_raises_the_tick_by_tick_diagnosis():
+    """explicit_euler with Kp 1e8 and the check off diverges within 50 ms: the block keeps the
+    ticks before the failing one and raises the error the tick-by-tick path raises."""
+    settings = {"integrator": "explicit_euler", "kp": 1e8, "kv": 0.0}
+    sc, (one, many) = _pair("four_bar", **settings)
+    with pytest.raises(DivergenceError) as expected:
+        for _ in range(1000):
+            one.advance()
+    block = SampleBlock(sc.model, 1000)
+    with pytest.raises(DivergenceError) as got:
+        many.advance_block(block, 1000)
+    assert str(got.value) == str(expected.value)
+    assert got.value.closure == expected.value.closure == "tip_pin"
+    assert many.ticks == one.ticks  # the failing tick counted, as tick by tick
+    assert len(block) == many.ticks - 1  # the good ticks before it
+    assert many.t == one.t
+    np.testing.assert_array_equal(many.q, one.q)
+    assert np.all(np.isfinite(block.q[: len(block)]))
+
+
+def test_trajectory_extend_equals_append():
+    sc, (one, many) = _pair("five_bar", integrator="rk4", closure="penalty")
+    a, b = Trajectory(sc.model, capacity=4), Trajectory(sc.model, capacity=4)  # both must grow
+    for _ in range(30):
+        one.advance()
+        a.append(one.sample())
+    block = SampleBlock(sc.model, 30)
+    many.advance_block(block, 30)
+    b.extend(block)
+    np.testing.assert_array_equal(a.table(), b.table())
+    assert a.summary() == b.summary()

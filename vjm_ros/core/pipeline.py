@@ -1,0 +1,198 @@
+"""Whole control ticks in one compiled call: the steps, the divergence guard and every observable.
+
+:func:`advance_ticks` runs ``ticks`` control ticks of a fixed-step integrator with the efforts
+held, as :meth:`vjm_ros.sim.simulator.Simulator.advance` followed by
+:meth:`~vjm_ros.sim.simulator.Simulator.sample` would, and writes each tick's end state and its
+observables into preallocated arrays (one row per tick). It calls the same compiled physics
+(:func:`vjm_ros.core.kernels.run`) with the same arguments as the tick-by-tick path, so the states
+are bit-identical to it; the observables are the same sums in the same order.
+
+It stops at the first tick whose step fails (a singular matrix), whose state is not finite or
+whose closure residual exceeds the divergence limit, and says which tick: the caller replays
+that tick on the tick-by-tick path, which raises the full diagnostic.
+
+Output arrays (``T`` ticks, ``n`` joints, ``p`` named points, ``k`` closures), each row ``i``
+for the state at the end of tick ``i``:
+
+* ``q``, ``qd``, ``qdd`` (T, n): rad or m, per s, per s^2;
+* ``theta`` (T, n): absolute link angles, rad;
+* ``points`` (T, p, 2): named points, m;
+* ``force`` (T, k, 3): ``(Fx, Fy, Mz)`` of each closure on its point, N and N m;
+* ``error`` (T, k): ``|C|`` per closure, m or rad;
+* ``cpoints`` (T, k, 2): the closures' points of application, m;
+* ``energy`` (T, 4): kinetic, potential, constraint (penalty springs), total, J;
+* ``power`` (T,): ``tau . qd``, W; ``dissipation`` (T,): ``sum Kv Cdot^2`` (penalty), W;
+* ``segments`` (T, n, 2, 2): start and end of every link, m.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vjm_ros.core import kernels as K
+from vjm_ros.core.jit import jit as _jit
+
+OK = 0
+"""Every tick ran."""
+SINGULAR = 1
+"""A matrix was exactly singular in the failing tick."""
+NOT_FINITE = 2
+"""The state after the failing tick is not finite."""
+BEYOND_LIMIT = 3
+"""A closure residual after the failing tick exceeds the divergence limit."""
+
+
+@_jit
+def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
+    """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
+
+    Parameters
+    ----------
+    row : int
+    q, qd, tau : ndarray, shape (n,)
+    model : tuple
+        ``(lint, lflt, cint, cflt, gains, par)`` (:mod:`vjm_ros.core.kernels`).
+    buffers : tuple
+        ``(kin, mm, bias, cm, crow, jac, points)`` scratch buffers of the kernel.
+    lengths : ndarray, shape (n,)
+        Link lengths, m.
+    plink : ndarray of int64, shape (p,)
+        Link of each named point (``-1``: ground).
+    plocal : ndarray, shape (p, 2)
+        ``(s, w)`` of each named point in its link frame, m (world position on the ground).
+    out : tuple
+        ``(q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation,
+        segments)`` output arrays (module docstring).
+    work : tuple
+        Scratch arrays from :func:`vjm_ros.core.kernels.workspace`.
+
+    Returns
+    -------
+    int
+        0, or 1 when the mass matrix was exactly singular.
+    """
+    lint, lflt, cint, cflt, gains, par = model
+    kin, mm, bias, cm, crow, jac, cpts = buffers
+    o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
+    o_energy, o_power, o_diss, o_seg = out[8:]
+    n = q.shape[0]
+    status = K.step(K.EVALUATE, q, qd, tau, 0.0, 1, 0.0, lint, lflt, cint, cflt, gains, par,
+                    kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work)
+    power = 0.0
+    for j in range(n):
+        o_q[row, j] = q[j]
+        o_qd[row, j] = qd[j]
+        o_theta[row, j] = kin[j, K.K_THETA]
+        power += tau[j] * qd[j]
+        o_seg[row, j, 0, 0] = kin[j, K.K_OX]
+        o_seg[row, j, 0, 1] = kin[j, K.K_OY]
+        o_seg[row, j, 1, 0] = kin[j, K.K_OX] + lengths[j] * kin[j, K.K_COS]
+        o_seg[row, j, 1, 1] = kin[j, K.K_OY] + lengths[j] * kin[j, K.K_SIN]
+    for p in range(plink.shape[0]):
+        px, py, _, _, _, _ = K.point_motion(kin, plink[p], plocal[p, 0], plocal[p, 1])
+        o_points[row, p, 0] = px
+        o_points[row, p, 1] = py
+    k = cint.shape[0]
+    r = crow.shape[0]
+    dissipation = 0.0
+    for c in range(k):
+        first = cint[c, 3]
+        last = cint[c + 1, 3] if c + 1 < k else r
+        sq = 0.0
+        fx = fy = fz = 0.0
+        for i in range(first, last):
+            sq += crow[i, K.R_RES] ** 2
+            f = crow[i, K.R_FORCE]
+            fx += crow[i, K.R_DX] * f
+            fy += crow[i, K.R_DY] * f
+            fz += crow[i, K.R_DZ] * f
+        o_error[row, c] = math.sqrt(sq)
+        o_force[row, c, 0] = fx
+        o_force[row, c, 1] = fy
+        o_force[row, c, 2] = fz
+        o_cpoints[row, c, 0] = cpts[c, 0]
+        o_cpoints[row, c, 1] = cpts[c, 1]
+    if par[K.P_METHOD] == K.PENALTY:
+        for i in range(r):
+            dissipation += gains[i, 1] * crow[i, K.R_RATE] ** 2
+    kinetic = kin[n, K.K_PCOS]
+    potential = kin[n, K.K_PSIN]
+    spring = kin[n, K.K_SLIDE]
+    o_energy[row, 0] = kinetic
+    o_energy[row, 1] = potential
+    o_energy[row, 2] = spring
+    o_energy[row, 3] = kinetic + potential + spring
+    o_power[row] = power
+    o_diss[row] = dissipation
+    return status
+
+
+@_jit
+def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, buffers,
+                  lengths, plink, plocal, out):
+    """``ticks`` control ticks of ``substeps`` steps of ``method``, each observed.
+
+    Parameters
+    ----------
+    method : int
+        :data:`~vjm_ros.core.kernels.EXPLICIT_EULER`, ``SEMI_IMPLICIT_EULER``, ``RK4`` or
+        ``IMPLICIT_EULER``.
+    q0, qd0 : ndarray, shape (n,)
+        State at the start, not modified.
+    tau : ndarray, shape (n,)
+        Efforts held over every tick, N m or N.
+    h : float
+        Step, s (the tick over ``substeps``).
+    substeps, ticks : int
+    project : bool
+        Project ``q`` and ``qd`` onto the closures after each tick (8 Gauss-Newton steps at
+        most, tolerance 1e-12, as :meth:`vjm_ros.core.mechanism.Mechanism.project`).
+    limit : float
+        Largest accepted closure residual, m or rad (``inf``: no check).
+    model, buffers, lengths, plink, plocal, out
+        As in :func:`observe`.
+
+    Returns
+    -------
+    done : int
+        Ticks that ran and were observed (rows ``0 .. done - 1`` of ``out`` are filled).
+    code : int
+        :data:`OK`, or why tick ``done`` failed: :data:`SINGULAR`, :data:`NOT_FINITE`,
+        :data:`BEYOND_LIMIT`.
+    """
+    lint, lflt, cint, cflt, gains, par = model
+    kin, mm, bias, cm, crow, jac, cpts = buffers
+    n = q0.shape[0]
+    q = q0.copy()
+    qd = qd0.copy()
+    qa = np.empty(n)
+    qb = np.empty(n)
+    zero = np.zeros(n)
+    k = cint.shape[0]
+    work = K.workspace(n, crow.shape[0])
+    o_error = out[6]
+    for t in range(ticks):
+        status = K.step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
+                        par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work)
+        if status != 0:
+            return t, SINGULAR
+        if project:
+            status = K.step(K.PROJECT, qa, qb, zero, 0.0, 8, 1e-12, lint, lflt, cint, cflt,
+                            gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd, work)
+            if status != 0:
+                return t, SINGULAR
+        else:
+            for j in range(n):
+                q[j] = qa[j]
+                qd[j] = qb[j]
+        for j in range(n):
+            if not (math.isfinite(q[j]) and math.isfinite(qd[j])):
+                return t, NOT_FINITE
+        if observe(t, q, qd, tau, model, buffers, lengths, plink, plocal, out, work) != 0:
+            return t, SINGULAR
+        for c in range(k):
+            if o_error[t, c] > limit:
+                return t, BEYOND_LIMIT
+    return ticks, OK
