@@ -63,7 +63,9 @@ def test_block_equals_tick_by_tick(scene, settings):
             np.testing.assert_array_equal(getattr(g, f), getattr(e, f), err_msg=f)
     np.testing.assert_array_equal(many.q, one.q)
     assert many.t == one.t and many.ticks == one.ticks
-    assert many.mechanism.evaluations == one.mechanism.evaluations
+    # rk4 takes each tick's first stage from the sample before, except on a block's first tick
+    reused = (ticks - 3) if settings["integrator"] == "rk4" else 0
+    assert many.mechanism.evaluations == one.mechanism.evaluations - reused
 
 
 @pytest.mark.parametrize("settings", [{"integrator": "rk45"}, {"kernel": "numpy"}])

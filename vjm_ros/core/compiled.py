@@ -475,8 +475,8 @@ class FastMechanism(Mechanism):
     ) -> tuple[int, int]:
         """Control ticks in one compiled call, each observed (:func:`vjm_ros.core.pipeline.advance_ticks`).
 
-        As many ticks run as ``out`` has rows. ``evaluations`` counts what the tick-by-tick
-        path counts for the ticks that ran: the steps' stages and one evaluation per sample.
+        As many ticks run as ``out`` has rows. ``evaluations`` counts the steps' stages and one
+        evaluation per sample, less the RK4 first stages taken from the sample before.
 
         Returns
         -------
@@ -494,7 +494,8 @@ class FastMechanism(Mechanism):
             self._buffers, lengths, plink, plocal, out,
         )
         stages = 4 if method == K.RK4 else 1
-        self.evaluations += done * (stages * int(substeps) + 1)
+        reused = max(done - 1, 0) if method == K.RK4 else 0  # first stages taken from samples
+        self.evaluations += done * (stages * int(substeps) + 1) - reused
         return int(done), int(code)
 
 

@@ -378,7 +378,7 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     """
     return step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 kin, mm, bias, cm, crow, jac, points, out_a, out_b,
-                workspace(q0.shape[0], crow.shape[0]))
+                workspace(q0.shape[0], crow.shape[0]), np.empty((0, 0)), -1)
 
 
 @_jit
@@ -392,9 +392,13 @@ def workspace(n, r):
 
 @_jit
 def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
-         kin, mm, bias, cm, crow, jac, points, out_a, out_b, work):
+         kin, mm, bias, cm, crow, jac, points, out_a, out_b, work, known, row):
     """:func:`run` with its scratch arrays given (``work``, from :func:`workspace`): no
-    allocation, for callers that run many ticks."""
+    allocation, for callers that run many ticks.
+
+    ``known[row]``, shape (n,), for :data:`RK4` and ``row >= 0``: the acceleration at
+    ``(q0, qd0)`` with ``tau``, which the caller has just evaluated (the first stage then reuses
+    it: the same numbers, one evaluation fewer); ``row = -1``: nothing known."""
     n = q0.shape[0]
     r = crow.shape[0]
     lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero = work
@@ -442,6 +446,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 break
         return status
 
+    reuse = op == RK4 and row >= 0
     single = op == EVALUATE or op == IMPLICIT_VELOCITY
     stages = 4 if op == RK4 else 1
     total = 1 if single else steps * stages
@@ -458,41 +463,45 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
             for j in range(n):
                 qi[j] = q[j] + h * (cst * vs[stage - 1, j])
                 vs[stage, j] = qd[j] + h * (cst * ks[stage - 1, j])
-        terms(qi, vs[stage], lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
-              points)
+        if reuse and it == 0:
+            for j in range(n):  # the caller evaluated this very state: the same numbers
+                acc[j] = known[row, j]
+        else:
+            terms(qi, vs[stage], lint, lflt, cint, cflt, par, full, kin, mm, bias, cm, crow, jac,
+                  points)
 
-        # open-chain force Q = tau - b, plus A^T F for penalty closures; then qdd = M^-1 (...)
-        for i in range(n):
-            for j in range(n):
-                lu[i, j] = mm[i, j]
-        status = max(status, lu_factor(lu, piv))
-        if not exact:
-            for i in range(r):
-                crow[i, R_FORCE] = -(gains[i, 0] * crow[i, R_RES] + gains[i, 1] * crow[i, R_RATE])
-        for j in range(n):
-            s = tau[j] - bias[j]
-            if not exact:
-                t = 0.0
-                for i in range(r):
-                    t += jac[i, j] * crow[i, R_FORCE]
-                s = s + t
-            acc[j] = s
-        lu_solve(lu, piv, acc)
-        if exact:
-            # A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)
-            two_alpha = 2.0 * par[P_ALPHA]
-            beta2 = par[P_BETA] ** 2
-            for i in range(r):
-                s = 0.0
+            # open-chain force Q = tau - b, plus A^T F for penalty closures; then qdd = M^-1 (...)
+            for i in range(n):
                 for j in range(n):
-                    s += jac[i, j] * acc[j]
-                rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
-                           + beta2 * crow[i, R_RES])
-            min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec)
-            for i in range(r):
-                crow[i, R_FORCE] = vec[0, i]
+                    lu[i, j] = mm[i, j]
+            status = max(status, lu_factor(lu, piv))
+            if not exact:
+                for i in range(r):
+                    crow[i, R_FORCE] = -(gains[i, 0] * crow[i, R_RES] + gains[i, 1] * crow[i, R_RATE])
             for j in range(n):
-                acc[j] += corr[j]
+                s = tau[j] - bias[j]
+                if not exact:
+                    t = 0.0
+                    for i in range(r):
+                        t += jac[i, j] * crow[i, R_FORCE]
+                    s = s + t
+                acc[j] = s
+            lu_solve(lu, piv, acc)
+            if exact:
+                # A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)
+                two_alpha = 2.0 * par[P_ALPHA]
+                beta2 = par[P_BETA] ** 2
+                for i in range(r):
+                    s = 0.0
+                    for j in range(n):
+                        s += jac[i, j] * acc[j]
+                    rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
+                               + beta2 * crow[i, R_RES])
+                min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec)
+                for i in range(r):
+                    crow[i, R_FORCE] = vec[0, i]
+                for j in range(n):
+                    acc[j] += corr[j]
         if op == EVALUATE:
             kinetic = 0.0
             potential = 0.0

@@ -23,6 +23,10 @@ for the state at the end of tick ``i``:
 * ``energy`` (T, 4): kinetic, potential, constraint (penalty springs), total, J;
 * ``power`` (T,): ``tau . qd``, W; ``dissipation`` (T,): ``sum Kv Cdot^2`` (penalty), W;
 * ``segments`` (T, n, 2, 2): start and end of every link, m.
+
+With :data:`~vjm_ros.core.kernels.RK4`, a tick's first stage is the acceleration observed at the
+end of the tick before (the same state and efforts, so the same numbers): from the second tick of
+a block on, a tick costs ``4 substeps`` evaluations, the observation included.
 """
 
 from __future__ import annotations
@@ -79,7 +83,7 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
     status = K.step(K.EVALUATE, q, qd, tau, 0.0, 1, 0.0, lint, lflt, cint, cflt, gains, par,
-                    kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work)
+                    kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work, o_qdd, -1)
     power = 0.0
     for j in range(n):
         o_q[row, j] = q[j]
@@ -172,15 +176,18 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     zero = np.zeros(n)
     k = cint.shape[0]
     work = K.workspace(n, crow.shape[0])
+    o_qdd = out[2]
     o_error = out[6]
     for t in range(ticks):
+        # From the second tick on, the first RK4 stage is the state observed at the last tick.
+        known = t - 1 if method == K.RK4 else -1
         status = K.step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
-                        par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work)
+                        par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
             return t, SINGULAR
         if project:
             status = K.step(K.PROJECT, qa, qb, zero, 0.0, 8, 1e-12, lint, lflt, cint, cflt,
-                            gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd, work)
+                            gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd, work, o_qdd, -1)
             if status != 0:
                 return t, SINGULAR
         else:
