@@ -38,6 +38,22 @@ import numpy as np
 from vjm_ros.core import kernels as K
 from vjm_ros.core.jit import jit as _jit
 
+OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints", "energy",
+               "power", "dissipation", "segments")
+"""Names of the output arrays, in the order :func:`observe` takes them."""
+
+
+def observable_shapes(n: int, points: int, closures: int) -> tuple[tuple[int, ...], ...]:
+    """Shape of one row of each output array (:data:`OBSERVABLES` order)."""
+    return ((n,), (n,), (n,), (n,), (points, 2), (closures, 3), (closures,), (closures, 2), (4,),
+            (), (), (n, 2, 2))
+
+
+def new_outputs(rows: int, n: int, points: int, closures: int) -> tuple[np.ndarray, ...]:
+    """Zeroed output arrays for ``rows`` ticks."""
+    return tuple(np.zeros((rows,) + shape) for shape in observable_shapes(n, points, closures))
+
+
 OK = 0
 """Every tick ran."""
 SINGULAR = 1

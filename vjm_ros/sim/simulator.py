@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
@@ -80,14 +81,11 @@ class Sample:
         return float(self.closure_error.max()) if self.closure_error.size else 0.0
 
 
-_BLOCK_FIELDS = (
-    ("q", "q"), ("qd", "qd"), ("qdd", "qdd"), ("theta", "theta"), ("points", "points"),
-    ("force", "closure_force"), ("error", "closure_error"), ("cpoints", "closure_points"),
-    ("energy", "energy"), ("power", "power_in"), ("dissipation", "dissipation"),
-    ("segments", "segments"),
-)
-"""Arrays of a :class:`SampleBlock`, in the compiled pipeline's order, and the
-:class:`Sample` field each row of them gives."""
+_BLOCK_FIELDS = tuple(zip(pipeline.OBSERVABLES, (
+    "q", "qd", "qdd", "theta", "points", "closure_force", "closure_error", "closure_points",
+    "energy", "power_in", "dissipation", "segments"), strict=True))
+"""Arrays of a :class:`SampleBlock` (the compiled pipeline's outputs) and the :class:`Sample`
+field each row of them gives."""
 
 
 class SampleBlock:
@@ -105,15 +103,12 @@ class SampleBlock:
     """
 
     def __init__(self, model: Model, capacity: int):
-        n, k, p = model.n, len(model.closures), len(model.points)
-        shapes = {"q": (n,), "qd": (n,), "qdd": (n,), "theta": (n,), "points": (p, 2),
-                  "force": (k, 3), "error": (k,), "cpoints": (k, 2), "energy": (4,),
-                  "power": (), "dissipation": (), "segments": (n, 2, 2)}
-        self.arrays = tuple(np.zeros((capacity,) + shapes[key]) for key, _ in _BLOCK_FIELDS)
+        self.arrays = pipeline.new_outputs(capacity, model.n, len(model.points),
+                                           len(model.closures))
         for (key, _), arr in zip(_BLOCK_FIELDS, self.arrays, strict=True):
             setattr(self, key, arr)
         self.t = np.zeros(capacity)
-        self.effort = np.zeros(n)
+        self.effort = np.zeros(model.n)
         self.rows = 0
 
     def __len__(self) -> int:
