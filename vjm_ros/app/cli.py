@@ -250,6 +250,7 @@ def _cmd_run(args) -> int:
     if args.plots and args.out is None:
         raise ConfigurationError("--plots needs --out DIR")
     sim = Simulator(scene.model, settings, scene.gains)
+    sim.blocks_compiled()  # loads the compiled pipeline before the clock starts
     if args.effort is not None:
         sim.set_efforts(np.array(args.effort))
     elif scene.model.actuators:

@@ -191,6 +191,7 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     try:
         warm = _make_vjm(scene, cfg)  # a compiled kernel compiles here, not in the timed loop
         try:
+            warm.blocks_compiled()
             warm.advance_block(SampleBlock(scene.model, 1), 1)
         except (VjmError, np.linalg.LinAlgError, FloatingPointError):
             pass
