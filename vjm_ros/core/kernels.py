@@ -20,8 +20,8 @@ A point ``P`` on link ``i`` moves with joint ``k`` of the same chain (``k <= i``
 Everything is reached through one compiled entry point, :func:`run`, so that numba compiles the
 physics once (a few seconds on first use, then loaded from its cache in a fraction of a second).
 
-Model and method arrays (built by :func:`vjm_ros.core.compiled.pack_model` and
-:func:`vjm_ros.core.compiled.pack_method`):
+Model and method arrays (built by :func:`vjm_ros.core.packing.pack_model` and
+:func:`vjm_ros.core.packing.pack_method`):
 
 * ``lint`` int64 (n, 3): revolute flag, first-of-chain flag, index of the chain's first link;
 * ``lflt`` float64 (n, 10): base angle (rad), base origin x, y (m), predecessor length (m), locked
