@@ -11,11 +11,15 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
 
 from vjm_ros.ros.node import NODE_NAME
 from vjm_ros.ros.runtime import Spinner
@@ -90,3 +94,36 @@ class GraphProbe:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class TopicSink(GraphProbe):
+    """A probe that subscribes to every topic the simulator publishes and counts the messages.
+
+    Parameters
+    ----------
+    name : str
+        Node name of the sink.
+    closures : sequence of str
+        Closure names of the scene (one wrench topic each).
+    sim_node : str
+        Name of the simulator node.
+    """
+
+    def __init__(self, name: str, closures: Sequence[str], sim_node: str = NODE_NAME) -> None:
+        super().__init__(name, sim_node=sim_node)
+        from vjm_ros.ros.conversions import wrench_topic
+
+        private = f"/{sim_node}"
+        topics = [("/clock", Clock), ("/joint_states", JointState), ("/diagnostics", DiagnosticArray),
+                  (f"{private}/constraint_forces", Float64MultiArray),
+                  (f"{private}/energy", Float64MultiArray), (f"{private}/markers", MarkerArray),
+                  (f"{private}/events", String)]
+        topics += [(wrench_topic(c).replace("~", private, 1), WrenchStamped) for c in closures]
+        self.counts = dict.fromkeys((topic for topic, _ in topics), 0)
+        for topic, kind in topics:
+            self.node.create_subscription(kind, topic, self._counter(topic), 1000)
+
+    def _counter(self, topic: str) -> Callable:
+        def count(_msg) -> None:
+            self.counts[topic] += 1
+        return count

@@ -1,0 +1,27 @@
+"""The node-cost measurement runs end to end (its figures are benchmarks, not asserted here).
+
+It starts the real node and the bare publisher as processes, with this process subscribed to
+every topic: the test checks that each side really published what it claims to measure, so a
+figure can never come from a run that published nothing.
+"""
+
+from __future__ import annotations
+
+import math
+
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.studies import node_cost
+
+
+def test_node_cost_measures_a_node_that_published_every_topic():
+    row = node_cost.measure("four_bar", seconds=0.5)
+    assert row["ticks"] == 500
+    # four_bar has two closures: /clock, joint_states, forces, energy and one wrench each
+    assert row["topics_per_tick"] == 4 + len(load_scene("four_bar").model.closures)
+    assert row["joint_states_received"] > 0
+    per_tick = [t for t in row["received"] if t not in ("/diagnostics", "/vjm_sim_node/events",
+                                                        "/vjm_sim_node/markers")]
+    assert len(per_tick) == row["topics_per_tick"]
+    assert all(row["received"][t] > 0 for t in per_tick), row["received"]
+    for key in ("node_us", "physics_us", "bare_publish_us", "ratio"):
+        assert math.isfinite(row[key]) and row[key] > 0, key

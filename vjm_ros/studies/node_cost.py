@@ -1,0 +1,114 @@
+"""What the node costs per tick against its floor: the physics plus bare rclpy publishing.
+
+``python -m vjm_ros.studies.node_cost [--scenes ...] [--seconds 5]`` measures, per scene, in one
+run and with one subscriber process on every topic the node publishes (this process):
+
+1. **node**: ``vjm_sim_node`` in fast mode (``realtime:=false``) for ``seconds`` simulated
+   seconds at 1 kHz; process CPU time per tick from its exit summary (tick loop, executor and DDS
+   threads);
+2. **bare publish**: :mod:`vjm_ros.ros.bare_publish`, the same messages on the same topics per
+   tick from prebuilt messages, as fast as it can; process CPU time per tick;
+3. **physics**: the node's tick path (``Simulator.advance`` then ``Simulator.sample``) in this
+   process, CPU time per tick.
+
+The ratio ``node / (physics + bare publish)`` is the node's overhead over its floor (issue
+target: at most 1.3). CPU times on a shared 2-core machine vary from run to run: compare the
+figures of one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.settings import SimulationSettings
+from vjm_ros.sim.simulator import Simulator
+from vjm_ros.studies.latency import node_command, run_node
+
+RATE = 1000.0
+
+
+def physics_per_tick(scene: str, ticks: int = 3000) -> float:
+    """CPU seconds per tick of ``advance()`` plus ``sample()`` (the node's per-tick physics)."""
+    sc = load_scene(scene)
+    sim = Simulator(sc.model, SimulationSettings(rate=RATE), sc.gains)
+    if sc.model.actuators:
+        sim.set_efforts([a.effort for a in sc.model.actuators])
+    sim.advance()
+    sim.sample()
+    c0 = time.process_time()
+    for _ in range(ticks):
+        sim.advance()
+        sim.sample()
+    return (time.process_time() - c0) / ticks
+
+
+def bare_publish_per_tick(scene: str, ticks: int) -> tuple[float, int]:
+    """CPU seconds per tick of :mod:`vjm_ros.ros.bare_publish`, and its number of topics."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    out = subprocess.run(
+        [sys.executable, "-m", "vjm_ros.ros.bare_publish", "--scene", scene, "--ticks", str(ticks)],
+        env=env, capture_output=True, text=True, timeout=600)
+    line = next((x for x in out.stdout.splitlines() if x.startswith("bare ")), None)
+    if out.returncode != 0 or line is None:
+        raise RuntimeError(f"bare_publish failed ({out.returncode}):\n{out.stdout}{out.stderr}")
+    figures = json.loads(line[len("bare "):])
+    return figures["cpu_time"] / figures["ticks"], figures["topics"]
+
+
+def measure(scene: str, seconds: float) -> dict:
+    """The three costs of one scene (µs per tick) and the ratio."""
+    from vjm_ros.ros.probes import TopicSink
+
+    closures = [c.name for c in load_scene(scene).model.closures]
+    ticks = int(round(seconds * RATE))
+    with TopicSink("vjm_cost_sink", closures) as sink:
+        node = run_node(node_command(scene, RATE, seconds, False, ["marker_rate_hz:=10.0"]))
+        received_node = dict(sink.counts)
+        bare, topics = bare_publish_per_tick(scene, ticks)
+    physics = physics_per_tick(scene)
+    node_tick = node["cpu_time"] / max(node["ticks"], 1)
+    return {
+        "scene": scene,
+        "ticks": node["ticks"],
+        "topics_per_tick": topics,
+        "node_us": 1e6 * node_tick,
+        "physics_us": 1e6 * physics,
+        "bare_publish_us": 1e6 * bare,
+        "ratio": node_tick / (physics + bare),
+        "joint_states_received": received_node.get("/joint_states", 0),
+        "received": received_node,
+        "load_1min": os.getloadavg()[0],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.node_cost",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("--scenes", nargs="*", default=["four_bar", "five_bar", "three_chain"])
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated s per node run")
+    parser.add_argument("--json", action="store_true", help="rows as JSON on the last line")
+    args = parser.parse_args(argv)
+    rows = []
+    for scene in args.scenes:
+        row = measure(scene, args.seconds)
+        rows.append(row)
+        print(f"{scene:>14}: node {row['node_us']:.0f} us CPU per tick; physics "
+              f"{row['physics_us']:.0f} us + bare publish of {row['topics_per_tick']} messages "
+              f"{row['bare_publish_us']:.0f} us; ratio {row['ratio']:.2f} (target <= 1.3); "
+              f"{row['joint_states_received']} joint states received of {row['ticks'] + 1}; "
+              f"load {row['load_1min']:.2f}", flush=True)
+    if args.json:
+        print(json.dumps(rows, default=float))
+    return 0 if all(np.isfinite(r["ratio"]) for r in rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
