@@ -143,6 +143,74 @@ def clock(t: float) -> Clock:
     return Clock(clock=stamp(t))
 
 
+def _set_stamp(msg_stamp: Time, t: float) -> None:
+    msg_stamp.sec, msg_stamp.nanosec = divmod(layouts.seconds_to_ns(t), 1_000_000_000)
+
+
+class TickMessages:
+    """The per-tick messages, built once and refilled every tick.
+
+    rclpy serializes a message when it is published, so one instance per topic can be refilled
+    and published again; filling costs 0.3-0.9 µs a message where building one costs 1.7-4.7 µs.
+    Each ``fill`` method returns the message with the same content as the function of the same
+    name (:func:`joint_state`, :func:`constraint_forces`, :func:`energy`, :func:`wrench`,
+    :func:`clock`).
+
+    Parameters
+    ----------
+    joint_names : sequence of str
+        ``Model.joint_names``.
+    closure_names : sequence of str
+        ``Model.closure_names``.
+    """
+
+    def __init__(self, joint_names: Sequence[str], closure_names: Sequence[str]):
+        self.joint = JointState()
+        self.joint.header.frame_id = FRAME_ID
+        self.joint.name = list(joint_names)
+        self.forces = Float64MultiArray(
+            layout=labelled_layout(closure_names, len(FORCE_COMPONENTS)))
+        self.energy = Float64MultiArray(layout=labelled_layout(ENERGY_LABELS, 1))
+        self.wrenches = [WrenchStamped() for _ in closure_names]
+        for w in self.wrenches:
+            w.header.frame_id = FRAME_ID
+        self.clock = Clock()
+
+    def fill_joint_state(self, t: float, q: np.ndarray, qd: np.ndarray,
+                         effort: np.ndarray) -> JointState:
+        """As :func:`joint_state` (t in s; q, qd, effort shape (n,))."""
+        msg = self.joint
+        _set_stamp(msg.header.stamp, t)
+        msg.position = _doubles(q)
+        msg.velocity = _doubles(qd)
+        msg.effort = _doubles(effort)
+        return msg
+
+    def fill_constraint_forces(self, forces: np.ndarray) -> Float64MultiArray:
+        """As :func:`constraint_forces` (forces shape (k, 3))."""
+        self.forces.data = _doubles(forces.reshape(-1))
+        return self.forces
+
+    def fill_energy(self, values: np.ndarray) -> Float64MultiArray:
+        """As :func:`energy` (values shape (4,), J)."""
+        self.energy.data = _doubles(values)
+        return self.energy
+
+    def fill_wrench(self, index: int, force: np.ndarray, t: float) -> WrenchStamped:
+        """As :func:`wrench` for closure ``index``."""
+        msg = self.wrenches[index]
+        _set_stamp(msg.header.stamp, t)
+        msg.wrench.force.x = float(force[0])
+        msg.wrench.force.y = float(force[1])
+        msg.wrench.torque.z = float(force[2])
+        return msg
+
+    def fill_clock(self, t: float) -> Clock:
+        """As :func:`clock`."""
+        _set_stamp(self.clock.clock, t)
+        return self.clock
+
+
 def wrench_topic(closure: str) -> str:
     """Private topic of a closure's wrench, ``~/closures/<name>/wrench``."""
     return f"~/closures/{layouts.ros_name(closure)}/wrench"

@@ -259,7 +259,6 @@ class SimNode(Node):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._scene_pub = self.create_publisher(String, "~/scene_description", latched)
-        self._energy_layout = conv.labelled_layout(conv.ENERGY_LABELS, 1)
 
     def _commands_for(self, sim: Simulator) -> CommandBuffer:
         model = sim.model
@@ -284,7 +283,6 @@ class SimNode(Node):
         """Names, layouts and one wrench publisher per closure for ``model``."""
         self._joint_names = list(model.joint_names)
         self._closure_names = list(model.closure_names)
-        self._forces_layout = conv.labelled_layout(self._closure_names, len(conv.FORCE_COMPONENTS))
         for name in list(self._wrench_pubs):
             if name not in self._closure_names:
                 self.destroy_publisher(self._wrench_pubs.pop(name))
@@ -293,6 +291,7 @@ class SimNode(Node):
                 self._wrench_pubs[name] = self.create_publisher(
                     WrenchStamped, conv.wrench_topic(name), 10)
         self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
+        self._messages = conv.TickMessages(self._joint_names, self._closure_names)
         self._trace = conv.TipTrace(len(model.chains))
 
     # ------------------------------------------------------------------ outputs (loop thread)
@@ -310,19 +309,20 @@ class SimNode(Node):
 
     def clock(self, t: float) -> None:
         """Publish ``/clock``."""
-        self._clock_pub.publish(conv.clock(t))
+        self._clock_pub.publish(self._messages.fill_clock(t))
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
-        self._joint_pub.publish(conv.joint_state(self._joint_names, t, q, qd, effort))
+        self._joint_pub.publish(self._messages.fill_joint_state(t, q, qd, effort))
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
         forces = sample.closure_force
-        self._forces_pub.publish(conv.constraint_forces(self._forces_layout, forces))
-        for pub, force in zip(self._wrench_list, forces, strict=True):
-            pub.publish(conv.wrench(force, t))
-        self._energy_pub.publish(conv.energy(self._energy_layout, sample.energy))
+        messages = self._messages
+        self._forces_pub.publish(messages.fill_constraint_forces(forces))
+        for i, (pub, force) in enumerate(zip(self._wrench_list, forces, strict=True)):
+            pub.publish(messages.fill_wrench(i, force, t))
+        self._energy_pub.publish(messages.fill_energy(sample.energy))
 
     def markers(self, sample: Sample, t: float) -> None:
         """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
