@@ -314,21 +314,29 @@ class Simulator:
         if ticks == 0 or not self.blocks_compiled():
             self._advance_tick_by_tick(block, 0, ticks)
             return
-        arrays = tuple(a[:ticks] for a in block.arrays)
+        arrays = (block.arrays if ticks == len(block.t)
+                  else tuple(a[:ticks] for a in block.arrays))
         project = (isinstance(self.method, ExactClosure) and self.method.projection
                    and self.model.n_rows > 0)
         limit = self.divergence_limit if (self.model.n_rows and self.divergence_limit) else np.inf
         start = self.ticks
-        with np.errstate(all="ignore"):
-            done, code = self.mechanism.advance_observed(
-                self.integrator.kernel_method, self.q, self.qd, self.tau, self.h,
-                self.settings.substeps, project, limit, self.model.length, self._point_links,
-                self._point_local, arrays)
-        # the states before the last ticks, for the diagnosis of a divergence
-        for i in range(max(done - self._history.maxlen, 0), done):
-            q, qd = (self.q, self.qd) if i == 0 else (block.q[i - 1], block.qd[i - 1])
-            self._history.append(((start + i) * self.dt, q.copy(), qd.copy()))
-        block.t[:done] = (start + 1 + np.arange(done)) * self.dt
+        # compiled code raises no floating-point warnings: no np.errstate needed here
+        done, code = self.mechanism.advance_observed(
+            self.integrator.kernel_method, self.q, self.qd, self.tau, self.h,
+            self.settings.substeps, project, limit, self.model.length, self._point_links,
+            self._point_local, arrays)
+        # the states before the last ticks, for the diagnosis of a divergence (self.q is
+        # replaced below, never changed in place: no copy; block rows are refilled later: copies)
+        first = max(done - self._history.maxlen, 0)
+        if first == 0 and done:
+            self._history.append((start * self.dt, self.q, self.qd))
+        for i in range(max(first, 1), done):
+            self._history.append(((start + i) * self.dt, block.q[i - 1].copy(),
+                                  block.qd[i - 1].copy()))
+        if done == 1:
+            block.t[0] = (start + 1) * self.dt
+        else:
+            block.t[:done] = (start + 1 + np.arange(done)) * self.dt
         block.rows = done
         if done:
             self.q, self.qd = block.q[done - 1].copy(), block.qd[done - 1].copy()
