@@ -107,10 +107,14 @@ class TopicSink(GraphProbe):
         Closure names of the scene (one wrench topic each).
     sim_node : str
         Name of the simulator node.
+    on_state, commands
+        As in :class:`GraphProbe` (a controller that also watches every topic).
     """
 
-    def __init__(self, name: str, closures: Sequence[str], sim_node: str = NODE_NAME) -> None:
-        super().__init__(name, sim_node=sim_node)
+    def __init__(self, name: str, closures: Sequence[str], sim_node: str = NODE_NAME,
+                 on_state: Callable[[JointState], None] | None = None,
+                 commands: bool = False) -> None:
+        super().__init__(name, sim_node=sim_node, on_state=on_state, commands=commands)
         from vjm_ros.ros.conversions import wrench_topic
 
         private = f"/{sim_node}"

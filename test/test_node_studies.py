@@ -1,4 +1,5 @@
-"""The node-cost measurement runs end to end (its figures are benchmarks, not asserted here).
+"""The node measurements (studies.node_cost, studies.live_loop) run end to end; their figures
+are benchmarks, not asserted here.
 
 It starts the real node and the bare publisher as processes, with this process subscribed to
 every topic: the test checks that each side really published what it claims to measure, so a
@@ -25,3 +26,15 @@ def test_node_cost_measures_a_node_that_published_every_topic():
     assert all(row["received"][t] > 0 for t in per_tick), row["received"]
     for key in ("node_us", "physics_us", "bare_publish_us", "ratio"):
         assert math.isfinite(row[key]) and row[key] > 0, key
+
+
+def test_live_loop_measures_commands_that_reached_the_node():
+    """One second live with the controller in the loop: commands were sent, some showed in the
+    joint states (the lag is then measured, never assumed), and every per-tick topic arrived."""
+    from vjm_ros.studies import live_loop
+
+    row = live_loop.measure("five_bar", seconds=1.0, extra=[])
+    assert row["ticks"] == 1000
+    assert row["commands"] > 0 and 0 < row["applied_share"] <= 1
+    assert math.isfinite(row["lag_median_ticks"]) and row["lag_median_ticks"] >= 1
+    assert row["topics_received"] >= 4 + len(load_scene("five_bar").model.closures)
