@@ -1,6 +1,6 @@
 """Compiled joint-space inverse dynamics of a closed chain, for controllers at 1 kHz and more.
 
-One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.run`, ``EVALUATE``) fills
+One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.step`, ``EVALUATE``) fills
 ``M``, ``b``, ``A``, ``Adot qd`` and ``C`` into preallocated buffers; one compiled function
 (:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
 ``P = S^T B`` and the minimum ``W``-norm efforts. The algebra is that of
@@ -97,6 +97,7 @@ class CompiledInverseDynamics:
         self.ones, self.unlimited = np.ones(m), np.full(m, np.inf)
         self.zeros = np.zeros(n)
         self.out_a, self.out_b = np.empty(n), np.empty(n)
+        self.work = K.workspace(n, len(self.buffers[4]))
         self.tau, self.p, self.w = np.empty(m), np.empty((d, m)), np.empty(d)
 
     def __call__(self, q: np.ndarray, qd: np.ndarray, udd: np.ndarray, winv: np.ndarray,
@@ -104,8 +105,8 @@ class CompiledInverseDynamics:
         """Evaluate the model at ``(q, qd)`` and the efforts for ``udd``; a status code."""
         if not _finite(q, qd, udd):
             return NONFINITE
-        status = K.run(K.EVALUATE, q, qd, self.zeros, 0.0, 1, 0.0, *self.args, *self.buffers,
-                       self.out_a, self.out_b)
+        status = K.step(K.EVALUATE, q, qd, self.zeros, 0.0, 1, 0.0, *self.args, *self.buffers,
+                        self.out_a, self.out_b, self.work, K.NO_KNOWN, -1)
         if status:
             return SINGULAR
         _, mm, bias, _, crow, jac, _ = self.buffers

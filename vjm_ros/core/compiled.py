@@ -139,6 +139,7 @@ class FastMechanism(Mechanism):
         n, r, k = model.n, model.n_rows, len(model.closures)
         self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
         self._buffers = self._new_buffers()
+        self._work = K.workspace(n, r)
         self._rows = r
         super().__init__(model, method)
         self.closures = FastClosureSet(model)
@@ -170,16 +171,17 @@ class FastMechanism(Mechanism):
         tol: float = 0.0,
         buffers: tuple[np.ndarray, ...] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Call :func:`vjm_ros.core.kernels.run` and turn a singular matrix into ``LinAlgError``.
+        """Call :func:`vjm_ros.core.kernels.step` and turn a singular matrix into ``LinAlgError``.
 
         ``buffers`` receive the terms of the last evaluation (the instance's scratch buffers when
         omitted). Returns the kernel's two output vectors, fresh arrays of shape (n,).
         """
         out_a = np.empty(self.n)
         out_b = np.empty(self.n)
-        status = K.run(
+        status = K.step(
             op, q, qd, tau, h, steps, tol, self._lint, self._lflt, self._cint, self._cflt,
             self._gains, self._par, *(self._buffers if buffers is None else buffers), out_a, out_b,
+            self._work, K.NO_KNOWN, -1,
         )
         if status:
             raise np.linalg.LinAlgError("Singular matrix")
@@ -421,7 +423,7 @@ class FastMechanism(Mechanism):
             int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
             bool(project), float(limit),
             (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par),
-            self._buffers, lengths, plink, plocal, out,
+            self._buffers, lengths, plink, plocal, out, self._work,
         )
         stages = 4 if method == K.RK4 else 1
         reused = max(done - 1, 0) if method == K.RK4 else 0  # first stages taken from samples

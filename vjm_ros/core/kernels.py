@@ -17,7 +17,7 @@ A point ``P`` on link ``i`` moves with joint ``k`` of the same chain (``k <= i``
 ``e_z x (P - O_k)`` (revolute) or ``n(theta_pred_k)`` (prismatic). The mass matrix is
 ``sum_i m_i J_i^T J_i + I_i Jw_i^T Jw_i``, the bias ``sum_i J_i^T m_i (Jdot_i qdot - g)``.
 
-Everything is reached through one compiled entry point, :func:`run`, so that numba compiles the
+Everything is reached through one compiled entry point, :func:`step`, so that numba compiles the
 physics once (a few seconds on first use, then loaded from its cache in a fraction of a second).
 
 Model and method arrays (built by :func:`vjm_ros.core.packing.pack_model` and
@@ -45,7 +45,7 @@ Output buffers (columns named by the ``K_*``, ``C_*`` and ``R_*`` constants):
   ``(Fx, Fy, Mz)`` of a unit row force;
 * ``jac`` (r, n): ``A``; ``points`` (k, 2): application point ``Pa`` of each closure, m.
 
-:func:`run` returns a status: 0 on success, 1 when a matrix was exactly singular (the case in which
+:func:`step` returns a status: 0 on success, 1 when a matrix was exactly singular (the case in which
 ``numpy.linalg.solve`` raises ``LinAlgError``).
 """
 
@@ -333,10 +333,14 @@ def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, 
 
 
 # ---------------------------------------------------------------------------------- entry point
-@_jit
+NO_KNOWN = np.empty((0, 0))
+"""``known`` argument of :func:`step` when no acceleration is known."""
+
+
 def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
         kin, mm, bias, cm, crow, jac, points, out_a, out_b):
-    """The one compiled entry point.
+    """:func:`step` with a fresh workspace (a convenience: callers that evaluate often keep a
+    :func:`workspace` and call :func:`step`, the compiled entry point, themselves).
 
     Parameters
     ----------
@@ -378,12 +382,12 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     """
     return step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 kin, mm, bias, cm, crow, jac, points, out_a, out_b,
-                workspace(q0.shape[0], crow.shape[0]), np.empty((0, 0)), -1)
+                workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, -1)
 
 
-@_jit
-def workspace(n, r):
-    """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows."""
+def workspace(n: int, r: int) -> tuple[np.ndarray, ...]:
+    """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows (built in
+    Python once per mechanism: compiled callers receive it, so nothing is allocated per call)."""
     m = max(n, r)
     return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
             np.empty((r, r)), np.empty((3, m)), np.empty(r), np.empty(n), np.zeros((4, n)),
@@ -393,8 +397,8 @@ def workspace(n, r):
 @_jit
 def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
          kin, mm, bias, cm, crow, jac, points, out_a, out_b, work, known, row):
-    """:func:`run` with its scratch arrays given (``work``, from :func:`workspace`): no
-    allocation, for callers that run many ticks.
+    """The compiled entry point (what each ``op`` does: :func:`run`), with its scratch arrays
+    given (``work``, from :func:`workspace`): nothing is allocated per call.
 
     ``known[row]``, shape (n,), for :data:`RK4` and ``row >= 0``: the acceleration at
     ``(q0, qd0)`` with ``tau``, which the caller has just evaluated (the first stage then reuses

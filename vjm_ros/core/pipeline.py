@@ -4,7 +4,7 @@
 held, as :meth:`vjm_ros.sim.simulator.Simulator.advance` followed by
 :meth:`~vjm_ros.sim.simulator.Simulator.sample` would, and writes each tick's end state and its
 observables into preallocated arrays (one row per tick). It calls the same compiled physics
-(:func:`vjm_ros.core.kernels.run`) with the same arguments as the tick-by-tick path, so the states
+(:func:`vjm_ros.core.kernels.step`) with the same arguments as the tick-by-tick path, so the states
 are bit-identical to it; the observables are the same sums in the same order.
 
 It stops at the first tick whose step fails (a singular matrix), whose state is not finite or
@@ -151,7 +151,7 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
 
 @_jit
 def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, buffers,
-                  lengths, plink, plocal, out):
+                  lengths, plink, plocal, out, work):
     """``ticks`` control ticks of ``substeps`` steps of ``method``, each observed.
 
     Parameters
@@ -171,7 +171,7 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         most, tolerance 1e-12, as :meth:`vjm_ros.core.mechanism.Mechanism.project`).
     limit : float
         Largest accepted closure residual, m or rad (``inf``: no check).
-    model, buffers, lengths, plink, plocal, out
+    model, buffers, lengths, plink, plocal, out, work
         As in :func:`observe`.
 
     Returns
@@ -191,7 +191,6 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     qb = np.empty(n)
     zero = np.zeros(n)
     k = cint.shape[0]
-    work = K.workspace(n, crow.shape[0])
     o_qdd = out[2]
     o_error = out[6]
     for t in range(ticks):
