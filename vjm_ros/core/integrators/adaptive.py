@@ -9,9 +9,9 @@ boundary: a fresh effort is never mixed into a step already begun.
 
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
-from scipy.integrate import BDF as _BDF
-from scipy.integrate import DOP853, LSODA, RK23, RK45, Radau
 
 from vjm_ros.core.integrators.base import Integrator
 
@@ -25,7 +25,9 @@ class AdaptiveIntegrator(Integrator):
         Relative and absolute tolerances of the local error estimate.
     """
 
-    solver_class: type = RK45
+    solver_name: str = "RK45"
+    """Name of the ``scipy.integrate`` solver class (imported on first use: scipy.integrate
+    takes 0.4 s to import, which a run on a fixed-step method need not pay)."""
     fixed_step = False
 
     def __init__(self, rtol: float = 1e-9, atol: float = 1e-12):
@@ -58,7 +60,8 @@ class AdaptiveIntegrator(Integrator):
             def rhs(_t, yy):
                 return np.concatenate((yy[n:], system.accelerations(yy[:n], yy[n:], tau_fixed)))
 
-            self._solver = self.solver_class(
+            solver_class = getattr(importlib.import_module("scipy.integrate"), self.solver_name)
+            self._solver = solver_class(
                 rhs, t, y, t_bound=np.inf, rtol=self.rtol, atol=self.atol
             )
             self._tau = tau_fixed
@@ -74,20 +77,21 @@ class AdaptiveIntegrator(Integrator):
         return y_end[:n].copy(), y_end[n:].copy()
 
 
-def _method(cls_name: str, name: str, order: int, solver, doc: str) -> type[AdaptiveIntegrator]:
-    """An adaptive integrator: scipy's ``solver`` under a registry ``name``."""
+def _method(cls_name: str, name: str, order: int, solver: str,
+            doc: str) -> type[AdaptiveIntegrator]:
+    """An adaptive integrator: scipy's ``solver`` (class name) under a registry ``name``."""
     return type(cls_name, (AdaptiveIntegrator,), {
         "__doc__": doc, "__module__": __name__, "name": name, "order": order,
-        "solver_class": solver,
+        "solver_name": solver,
     })
 
 
-Dop853 = _method("Dop853", "dop853", 8, DOP853,
+Dop853 = _method("Dop853", "dop853", 8, "DOP853",
                  "Explicit Runge-Kutta of order 8 (Dormand-Prince), for smooth non-stiff runs.")
-Rk45 = _method("Rk45", "rk45", 5, RK45, "Explicit Runge-Kutta 5(4) (Dormand-Prince).")
-Rk23 = _method("Rk23", "rk23", 3, RK23, "Explicit Runge-Kutta 3(2) (Bogacki-Shampine).")
-RadauIIA = _method("RadauIIA", "radau", 5, Radau,
+Rk45 = _method("Rk45", "rk45", 5, "RK45", "Explicit Runge-Kutta 5(4) (Dormand-Prince).")
+Rk23 = _method("Rk23", "rk23", 3, "RK23", "Explicit Runge-Kutta 3(2) (Bogacki-Shampine).")
+RadauIIA = _method("RadauIIA", "radau", 5, "Radau",
                    "Implicit Runge-Kutta Radau IIA of order 5, for stiff penalty gains.")
-Bdf = _method("Bdf", "bdf", 5, _BDF,
+Bdf = _method("Bdf", "bdf", 5, "BDF",
               "Variable-order backward differentiation formulas, for stiff penalty gains.")
-Lsoda = _method("Lsoda", "lsoda", 12, LSODA, "Adams/BDF switching (LSODA).")
+Lsoda = _method("Lsoda", "lsoda", 12, "LSODA", "Adams/BDF switching (LSODA).")
