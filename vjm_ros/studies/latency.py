@@ -66,6 +66,16 @@ def node_summary(returncode: int, output: str) -> dict:
     return json.loads(match.group(1))
 
 
+def take_applied(tracker, msg):
+    """Count a joint state and pop what ``tracker.pending`` holds for the effort it shows
+    applied on ``tracker.joint`` (None: no pending command has that value). Call under
+    ``tracker.lock``."""
+    if tracker.index is None:
+        tracker.index = list(msg.name).index(tracker.joint)
+    tracker.states += 1
+    return tracker.pending.pop(msg.effort[tracker.index], None)
+
+
 class Probe:
     """Publishes effort commands and times their first appearance in ``/joint_states``.
 
@@ -91,12 +101,8 @@ class Probe:
 
     def _on_state(self, msg) -> None:
         now = time.monotonic()
-        if self.index is None:
-            self.index = list(msg.name).index(self.joint)
-        effort = msg.effort[self.index]
         with self.lock:
-            self.states += 1
-            sent = self.pending.pop(effort, None)
+            sent = take_applied(self, msg)
             if sent is not None:
                 self.latencies.append(now - sent)
 

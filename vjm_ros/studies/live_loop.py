@@ -27,7 +27,7 @@ import threading
 import numpy as np
 
 from vjm_ros.scene.loader import builtin_scenes, load_scene
-from vjm_ros.studies.latency import node_command, run_node
+from vjm_ros.studies.latency import node_command, run_node, take_applied
 
 RATE = 1000.0
 
@@ -49,7 +49,7 @@ class LoopController:
         self.joint = model.joints[act.joint].name
         self.count = len(model.actuators)
         self.magnitude = 0.5 * min(act.limit, 1.0)
-        self.sent: dict[float, int] = {}
+        self.pending: dict[float, int] = {}
         self.lags: list[int] = []
         self.states = 0
         self.index: int | None = None
@@ -63,16 +63,12 @@ class LoopController:
 
     def _on_state(self, msg) -> None:
         tick = int(round((msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec) * RATE))
-        if self.index is None:
-            self.index = list(msg.name).index(self.joint)
-        applied = msg.effort[self.index]
+        value = self._value(tick)
         with self.lock:
-            self.states += 1
-            answered = self.sent.pop(applied, None)
+            answered = take_applied(self, msg)
             if answered is not None:
                 self.lags.append(tick - answered)
-            value = self._value(tick)
-            self.sent[value] = tick
+            self.pending[value] = tick
         if self.sink.commands_matched():
             self.sink.publish_efforts([value] + [0.0] * (self.count - 1))
 
@@ -80,7 +76,7 @@ class LoopController:
         """Lags (ticks) and counts; stops the controller."""
         self.sink.close()
         lags = np.array(self.lags, dtype=float)
-        return {"commands": int(lags.size + len(self.sent)), "applied": int(lags.size),
+        return {"commands": int(lags.size + len(self.pending)), "applied": int(lags.size),
                 "lags": lags, "received": dict(self.sink.counts)}
 
 
