@@ -333,7 +333,8 @@ def _measures_text() -> list[str]:
 
 def _scaling_text(scaling: dict) -> list[str]:
     lines = ["## Cost per tick against size", "",
-             "Microseconds per 1 kHz tick (one step per tick), median of repeats. `links`: one "
+             "Microseconds per 1 kHz tick (one step per tick, each tick sampled, in blocks of "
+             "200 ticks as `vjm run` runs them), median of repeats. `links`: one "
              "chain of N links whose tip runs on a line; `chains`: N two-link chains whose tips "
              "meet at one pin (2(N−1) closure rows).", "", "![scaling](scaling.png)", ""]
     for family in ("links", "chains"):
