@@ -1,6 +1,17 @@
-"""numba's ``njit`` with the project's options, or the plain function where numba is missing."""
+"""numba's ``njit`` with the project's options, or the plain function where numba is missing.
+
+numba keys each cached function on the source file that defines it, and does not notice when a
+function it calls from another file changes: a kernel in ``pipeline.py`` would keep running the
+old ``kernels.step`` after an edit of ``kernels.py``. So every function compiled here is keyed on
+the contents of all of the package's compiled sources (:data:`COMPILED_SOURCES`): any change to
+one of them recompiles them all.
+"""
 
 from __future__ import annotations
+
+import functools
+import hashlib
+from pathlib import Path
 
 try:  # numba is optional: without it the kernels run as plain Python
     from numba import njit as _njit
@@ -8,6 +19,62 @@ try:  # numba is optional: without it the kernels run as plain Python
     HAVE_NUMBA = True
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     HAVE_NUMBA = False
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+COMPILED_SOURCES = tuple(sorted(
+    [*(_PACKAGE / "core").glob("*.py"), _PACKAGE / "control" / "compiled.py"]))
+"""Files whose contents key every compiled function's cache: all of ``core/`` (the kernels and
+what they are built from) and the controllers' compiled algebra."""
+
+
+@functools.lru_cache(maxsize=1)
+def sources_stamp() -> bytes:
+    """SHA-256 over the contents of :data:`COMPILED_SOURCES` (read once per process)."""
+    digest = hashlib.sha256()
+    for path in COMPILED_SOURCES:
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.digest()
+
+
+def _keyed_on_sources(base: type) -> type:
+    """A numba cache locator like ``base`` whose source stamp is :func:`sources_stamp`, for the
+    functions of this package only (others fall through to numba's own locators)."""
+
+    class Locator(base):
+        def get_source_stamp(self):
+            return sources_stamp()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if not str(Path(py_file).resolve()).startswith(str(_PACKAGE)):
+                return None
+            return super().from_function(py_func, py_file)
+
+    Locator.__name__ = Locator.__qualname__ = f"VjmSources{base.__name__}"
+    return Locator
+
+
+def _install_locators() -> bool:
+    """Put the source-keyed locators first in numba's list; False where numba's caching layout
+    is not the one expected (numba's own per-file keys then apply)."""
+    try:
+        from numba.core import caching
+
+        bases = (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator,
+                 caching.UserWideCacheLocator)
+        impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+        classes = impl._locator_classes
+    except (ImportError, AttributeError):  # pragma: no cover - another numba layout
+        return False
+    if not any(c.__name__.startswith("VjmSources") for c in classes):
+        classes[:0] = [_keyed_on_sources(b) for b in bases]
+    return True
+
+
+LOCATORS_INSTALLED = HAVE_NUMBA and _install_locators()
+"""Whether compiled functions are keyed on :func:`sources_stamp`."""
 
 
 def jit(fn):
