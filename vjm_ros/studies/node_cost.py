@@ -8,8 +8,8 @@ run and with one subscriber process on every topic the node publishes (this proc
    threads);
 2. **bare publish**: :mod:`vjm_ros.ros.bare_publish`, the same messages on the same topics per
    tick from prebuilt messages, as fast as it can; process CPU time per tick;
-3. **physics**: the node's tick path (``Simulator.advance`` then ``Simulator.sample``) in this
-   process, CPU time per tick.
+3. **physics**: the node's tick path (one compiled call per tick for the step, the guard and
+   the sample) in this process, CPU time per tick.
 
 The ratio ``node / (physics + bare publish)`` is the node's overhead over its floor (issue
 target: at most 1.3). CPU times on a shared 2-core machine vary from run to run: compare the
@@ -29,24 +29,26 @@ import numpy as np
 
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import Simulator
+from vjm_ros.sim.simulator import SampleBlock, Simulator
 from vjm_ros.studies.latency import node_command, run_node
 
 RATE = 1000.0
 
 
 def physics_per_tick(scene: str, ticks: int = 3000) -> float:
-    """CPU seconds per tick of ``advance()`` plus ``sample()`` (the node's per-tick physics)."""
+    """CPU seconds per tick of the node's physics: one compiled call for the step, the guard and
+    the sample (``advance_block`` of one tick) and the sample handed out, as the tick loop does."""
     sc = load_scene(scene)
     sim = Simulator(sc.model, SimulationSettings(rate=RATE), sc.gains)
     if sc.model.actuators:
         sim.set_efforts([a.effort for a in sc.model.actuators])
-    sim.advance()
-    sim.sample()
+    sim.blocks_compiled()
+    block = SampleBlock(sc.model, 1)
+    sim.advance_block(block, 1)
     c0 = time.process_time()
     for _ in range(ticks):
-        sim.advance()
-        sim.sample()
+        sim.advance_block(block, 1)
+        block.sample(0)
     return (time.process_time() - c0) / ticks
 
 
