@@ -226,6 +226,20 @@ def test_accelerations_and_implicit_velocity(name, model, kind):
     assert fast.evaluations == ref.evaluations
 
 
+@pytest.mark.parametrize("name,model", MODELS, ids=MODEL_IDS)
+def test_closure_jacobian(name, model):
+    """``A(q)`` from one kernel call equals the reference's (the node's singularity measure);
+    the kernel sums the same products in another order: 1e-12 relative."""
+    rng = np.random.default_rng(11)
+    method = _method("exact", model.n_rows, rng)
+    ref, fast = Mechanism(model, method), FastMechanism(model, method)
+    for q, _, _ in [(*model.initial_state(), None)] + _states(rng, model, method, 5):
+        a_ref = ref.closure_jacobian(q)
+        np.testing.assert_allclose(fast.closure_jacobian(q), a_ref, rtol=1e-12,
+                                   atol=1e-12 * max(1.0, float(np.abs(a_ref).max(initial=0.0))))
+    assert fast.evaluations == 0
+
+
 @pytest.mark.parametrize("kind", METHODS)
 @pytest.mark.parametrize("name,model", MODELS, ids=MODEL_IDS)
 def test_evaluate_every_term(name, model, kind):

@@ -337,6 +337,13 @@ class FastMechanism(Mechanism):
         )
 
     # ------------------------------------------------------------------ extras
+    def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """The closure Jacobian ``A(q)``, shape (r, n), from one kernel call (``evaluations``
+        unchanged: this is not a right-hand side)."""
+        zero = np.zeros(self.n)
+        self._run(K.EVALUATE, _vec(q), zero, zero)
+        return self._buffers[5].copy()
+
     def closure_errors(self, q: np.ndarray) -> np.ndarray:
         """Size of each closure's residual at ``q`` (what the simulator's divergence guard reads).
 

@@ -124,6 +124,10 @@ class Mechanism:
         constraint = self.method.energy(ev.closure) if self.is_penalty else 0.0
         return np.array([kinetic, potential, constraint, kinetic + potential + constraint])
 
+    def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """The closure Jacobian ``A(q)``, shape (r, n)."""
+        return self.closures.evaluate(dynamics_terms(self.model, q, np.zeros(self.n)).kin).jacobian
+
     def project(
         self, q: np.ndarray, qd: np.ndarray, tol: float = 1e-12, iterations: int = 8
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -436,8 +436,12 @@ class Simulator:
         """Singular values of the closure Jacobian at ``q``, largest first (empty if none)."""
         if not self.model.n_rows or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             return np.zeros(0)
-        ct = self.mechanism.closures.evaluate(forward_kinematics(self.model, q, qd))
-        return np.linalg.svd(ct.jacobian, compute_uv=False)
+        try:  # one kernel call where the kernel is compiled
+            jacobian = self.mechanism.closure_jacobian(q)
+        except np.linalg.LinAlgError:  # a singular mass matrix: the Jacobian from kinematics
+            jacobian = self.mechanism.closures.evaluate(
+                forward_kinematics(self.model, q, qd)).jacobian
+        return np.linalg.svd(jacobian, compute_uv=False)
 
     # ------------------------------------------------------------------ outputs
     def sample(self, singular_values: bool = False, geometry: bool = True) -> Sample:
