@@ -106,6 +106,10 @@ def test_replay_reads_a_truncated_log(log, tmp_path):
     info = replay(cut, tmp_path / "cut.rrd")
     assert not info["complete"]
     assert 0 < info["samples"] < TICKS
+    (line,) = info["damage"]  # where reading stopped, named for the user
+    assert str(cut) in line and "reading stopped at byte" in line
+    assert f"of {cut.stat().st_size}" in line
+    assert replay(path, tmp_path / "whole.rrd")["damage"] == []  # a finalized log is whole
 
 
 def test_recover_keeps_every_complete_chunk(log, tmp_path):
@@ -116,13 +120,18 @@ def test_recover_keeps_every_complete_chunk(log, tmp_path):
         chunks = reader.get_summary().chunk_indexes
         times = [m.log_time for _, _, m in reader.iter_messages(log_time_order=False)]
     assert len(chunks) > 4 and len(times) == written
-    assert recover(path, tmp_path / "full.mcap") == written  # a finalized file is copied whole
+    damage: list[str] = []
+    assert recover(path, tmp_path / "full.mcap", damage) == written  # copied whole
+    assert damage == []
     ends = sorted(c.chunk_start_offset + c.chunk_length for c in chunks)
     for cut_at in (ends[2] - 1, ends[2], ends[3] + 7, len(data) - 20):
         cut = tmp_path / f"cut_{cut_at}.mcap"
         cut.write_bytes(data[:cut_at])
         fixed = tmp_path / f"fixed_{cut_at}.mcap"
-        saved = recover(cut, fixed)
+        damage = []
+        saved = recover(cut, fixed, damage)
+        if cut_at < ends[-1]:  # a cut in the data is reported; one in the summary loses nothing
+            assert len(damage) == 1 and str(cut) in damage[0], damage
         complete = [c for c in chunks if c.chunk_start_offset + c.chunk_length <= cut_at]
         last_time = max(c.message_end_time for c in complete)
         assert saved == sum(t <= last_time for t in times)  # all complete chunks, nothing else
@@ -135,6 +144,22 @@ def test_recover_keeps_every_complete_chunk(log, tmp_path):
             assert {m.name for m in reader.iter_metadata()} == {
                 "run_settings", "package_versions", "rosbag2"}  # one bag record, recounted
     assert saved == written  # the last cut only lost part of the summary
+
+
+@pytest.mark.parametrize("command", ["replay", "recover"])
+def test_cli_names_where_a_truncated_log_stops(log, tmp_path, command):
+    """``vjm replay`` and ``vjm recover`` on a cut log: exit 0 with what could be read, and a
+    warning on stderr naming the file and where reading stopped."""
+    path, _ = log
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    out = tmp_path / ("cut.rrd" if command == "replay" else "fixed.mcap")
+    res = subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", command, str(cut), "-o", str(out)],
+                         capture_output=True, text=True, timeout=120,
+                         env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+    assert res.returncode == 0, res.stderr
+    assert f"vjm: warning: {cut}: reading stopped at byte" in res.stderr
+    assert out.is_file()
 
 
 def test_recover_refuses_what_it_cannot_repair(log, tmp_path):

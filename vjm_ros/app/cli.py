@@ -166,12 +166,15 @@ def main(argv: list[str] | None = None) -> int:
 
             out = args.output or args.mcap.with_suffix(".rrd")
             info = _log_io(lambda: replay(args.mcap, out), args.mcap)
+            _warn_damage(info.get("damage", []))
             print(json.dumps({"rrd": str(out), **(info or {})}))
             return 0
         if args.command == "recover":
             from vjm_ros.logs.replay import recover
 
-            count = _log_io(lambda: recover(args.mcap, args.output), args.mcap)
+            damage: list[str] = []
+            count = _log_io(lambda: recover(args.mcap, args.output, damage), args.mcap)
+            _warn_damage(damage)
             print(f"recovered {count} messages into {args.output}")
             return 0
     except (SceneError, ConfigurationError) as exc:
@@ -181,6 +184,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"vjm: error: {exc}", file=sys.stderr)
         return 1
     return 0
+
+
+def _warn_damage(lines: list[str]) -> None:
+    """Say on stderr where a truncated or damaged log stopped being readable, and why."""
+    for line in lines:
+        print(f"vjm: warning: {line}", file=sys.stderr)
 
 
 def _log_io(action, path: Path):

@@ -35,7 +35,8 @@ from vjm_ros.sim.simulator import Sample
 
 
 # ---------------------------------------------------------------- reading
-def iter_records(path: str | Path, emit_chunks: bool = False) -> Iterator[object]:
+def iter_records(path: str | Path, emit_chunks: bool = False,
+                 damage: list[str] | None = None) -> Iterator[object]:
     """MCAP records of a file in order, ending quietly at an unreadable tail.
 
     Records inside a chunk are yielded only when the whole chunk could be read and its CRC
@@ -46,6 +47,9 @@ def iter_records(path: str | Path, emit_chunks: bool = False) -> Iterator[object
     path : str or Path
     emit_chunks : bool
         Yield chunks as ``Chunk`` records instead of the records inside them.
+    damage : list of str, optional
+        Receives one line naming the file, the byte where reading stopped and why, when the file
+        ends before its footer or a record cannot be read (the records before it are yielded).
 
     Yields
     ------
@@ -68,7 +72,13 @@ def iter_records(path: str | Path, emit_chunks: bool = False) -> Iterator[object
                 record = next(records)
             except StopIteration:
                 return
-            except Exception:  # any parse failure marks the end of the readable part
+            except Exception as exc:  # any parse failure marks the end of the readable part
+                if damage is not None:
+                    size = Path(path).stat().st_size
+                    damage.append(
+                        f"{path}: reading stopped at byte {f.tell()} of {size} "
+                        f"({type(exc).__name__}: {str(exc) or 'the file ends inside a record'}); "
+                        "the records before it are used, the rest of the file is not")
                 return
             yield record
 
@@ -126,7 +136,8 @@ def _matches(topic: str, wanted: tuple[str, ...]) -> bool:
 
 
 def iter_messages(
-    path: str | Path, topics: tuple[str, ...], counts: dict[str, int] | None = None
+    path: str | Path, topics: tuple[str, ...], counts: dict[str, int] | None = None,
+    damage: list[str] | None = None,
 ) -> Iterator[tuple[str, int, object]]:
     """Decoded ROS 2 messages of some topics, in file order.
 
@@ -137,6 +148,8 @@ def iter_messages(
         Topic names, or suffixes such as ``"/energy"`` (matched with ``str.endswith``).
     counts : dict, optional
         Filled with the number of messages of every topic in the file.
+    damage : list of str, optional
+        As in :func:`iter_records`.
 
     Yields
     ------
@@ -152,7 +165,7 @@ def iter_messages(
     schemas: dict[int, Schema] = {}
     channels: dict[int, tuple] = {}
     factory = DecoderFactory()
-    for record in iter_records(path):
+    for record in iter_records(path, damage=damage):
         if isinstance(record, Message):
             topic, decode = channels.get(record.channel_id, ("", None))
             counts[topic] = counts.get(topic, 0) + 1
@@ -240,7 +253,8 @@ class _Poser:
         )
 
 
-def _ticks(mcap_path: str | Path, joint_topic: str, counts: dict, events: list) -> Iterator:
+def _ticks(mcap_path: str | Path, joint_topic: str, counts: dict, events: list,
+           damage: list[str]) -> Iterator:
     """``(ns, joint_state, forces, energy)`` per tick, streamed; events collected on the side.
 
     A tick's messages share one log time and follow its joint state in the file, so a tick is
@@ -255,7 +269,7 @@ def _ticks(mcap_path: str | Path, joint_topic: str, counts: dict, events: list) 
             if js is not None:
                 yield ns, js, forces, energy
 
-    for topic, ns, msg in iter_messages(mcap_path, wanted, counts):
+    for topic, ns, msg in iter_messages(mcap_path, wanted, counts, damage):
         if topic == joint_topic:
             yield from complete(ns)
             pending.setdefault(ns, [None, None, None])[0] = msg
@@ -289,8 +303,9 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
     -------
     dict
         ``rrd`` (path), ``scene``, ``samples`` (joint states replayed), ``start`` and ``end``
-        (log time of the first and last, s), ``events``, ``complete`` (the log was finalized)
-        and ``messages`` (count per topic).
+        (log time of the first and last, s), ``events``, ``complete`` (the log was finalized),
+        ``messages`` (count per topic) and ``damage`` (lines from :func:`iter_records`: where
+        reading stopped in a truncated or damaged log, and why).
 
     Raises
     ------
@@ -313,7 +328,8 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
     settings["replayed_from"] = str(mcap_path)
     counts: dict[str, int] = {}
     events: list[tuple[int, str]] = []
-    ticks = _ticks(mcap_path, joint_topic, counts, events)
+    damage: list[str] = []
+    ticks = _ticks(mcap_path, joint_topic, counts, events, damage)
     first = next(ticks, None)
     if first is None:
         raise ValueError(f"{mcap_path}: no {joint_topic} messages to replay")
@@ -336,11 +352,12 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
         "events": len(events),
         "complete": info.complete,
         "messages": counts,
+        "damage": damage,
     }
 
 
 # ---------------------------------------------------------------- recovery
-def recover(in_path: str | Path, out_path: str | Path) -> int:
+def recover(in_path: str | Path, out_path: str | Path, damage: list[str] | None = None) -> int:
     """Write a finalized copy of the readable part of a (possibly truncated) MCAP log.
 
     Header, schemas, channels, attachments, metadata and every message of every complete chunk
@@ -354,6 +371,9 @@ def recover(in_path: str | Path, out_path: str | Path) -> int:
         The damaged log.
     out_path : str or Path
         The repaired copy (overwritten; must differ from ``in_path``).
+    damage : list of str, optional
+        Receives where reading stopped and why, if it stopped before the footer
+        (:func:`iter_records`).
 
     Returns
     -------
@@ -373,7 +393,7 @@ def recover(in_path: str | Path, out_path: str | Path) -> int:
     topics: dict[int, rosbag2.TopicRecord] = {}
     bag = rosbag2.BagInfo()
     count = 0
-    source = iter_records(in_path)
+    source = iter_records(in_path, damage=damage)
     first = next(source, None)
     records = source if isinstance(first, Header) else chain([first] if first else [], source)
     with open(out_path, "wb") as out, closing(source):
