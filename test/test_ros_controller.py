@@ -93,7 +93,7 @@ def test_the_controller_refuses_a_scene_that_is_not_a_five_bar():
 # ---------------------------------------------------------------- over ROS
 def spawn(module, *params):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(DOMAIN),
-               PYTHONPATH=str(ROOT))
+               PYTHONPATH=str(ROOT), PYTHONFAULTHANDLER="1")
     cmd = [sys.executable, "-m", module, "--ros-args"]
     for p in params:
         cmd += ["-p", p]
@@ -102,14 +102,21 @@ def spawn(module, *params):
 
 
 def reap(proc, sig=None, timeout=30.0):
+    """Exit code and output of ``proc`` after ``sig``. A process still alive after ``timeout``
+    (a hang guard) gets SIGABRT, so that faulthandler (PYTHONFAULTHANDLER, set by spawn) prints
+    where every thread of it was stuck into the output, then SIGKILL."""
     if sig is not None and proc.poll() is None:
         proc.send_signal(sig)
     try:
         out, _ = proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        try:
+            out, _ = proc.communicate(timeout=10.0)
+        except subprocess.TimeoutExpired:
             proc.kill()
             out, _ = proc.communicate()
+        return proc.returncode, f"(no exit within {timeout:g} s; tracebacks at SIGABRT)\n{out}"
     return proc.returncode, out
 
 
@@ -146,7 +153,9 @@ def test_pin_tracks_the_circle_with_the_example_controller():
         assert code == 0, out
         assert '"lockstep_timeouts": 0' in out, out  # the controller answered every tick
     finally:
-        ctl_code, ctl_out = reap(ctl, signal.SIGINT) if ctl is not None else (None, "")
+        # 60 s: a controller that is still compiling its kernel (a cold cache on a loaded machine)
+        # takes the signal only once the compiler returns
+        ctl_code, ctl_out = reap(ctl, signal.SIGINT, 60.0) if ctl is not None else (None, "")
         reap(sim, signal.SIGINT)
         spinner.stop()
         executor.shutdown()
