@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vjm_ros.core import kernels as K
+from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ClosureSet, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.dynamics import DynamicsTerms
 from vjm_ros.core.integrators import Integrator
@@ -155,6 +156,7 @@ class FastMechanism(Mechanism):
     def method(self, value: PenaltyClosure | ExactClosure) -> None:
         self._method = value
         self._gains, self._par = pack_method(value, self.model)
+        self._packed = (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par)
 
     def _new_buffers(self) -> tuple[np.ndarray, ...]:
         """Fresh output buffers ``kin, mm, bias, cm, crow, jac, points`` (see :mod:`._kernels`)."""
@@ -395,8 +397,6 @@ class FastMechanism(Mechanism):
     def warm_up_pipeline(self) -> float:
         """Compile the block pipeline (:mod:`vjm_ros.core.pipeline`), or load it from numba's
         cache, with a call of zero ticks. Returns the wall time spent, s."""
-        from vjm_ros.core import pipeline
-
         start = time.perf_counter()
         model = self.model
         q, qd = model.initial_state()
@@ -422,15 +422,12 @@ class FastMechanism(Mechanism):
         done, code : int
             Ticks that ran, and :data:`vjm_ros.core.pipeline.OK` or why tick ``done`` failed.
         """
-        from vjm_ros.core import pipeline
-
         if method not in _FIXED_METHODS:
             raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
         done, code = pipeline.advance_ticks(
             int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
-            bool(project), float(limit),
-            (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par),
-            self._buffers, lengths, plink, plocal, out, self._work,
+            bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal, out,
+            self._work,
         )
         stages = 4 if method == K.RK4 else 1
         reused = max(done - 1, 0) if method == K.RK4 else 0  # first stages taken from samples

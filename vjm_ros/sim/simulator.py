@@ -81,7 +81,7 @@ class Sample:
         return float(self.closure_error.max()) if self.closure_error.size else 0.0
 
 
-_BLOCK_FIELDS = tuple(zip(pipeline.OBSERVABLES, (
+BLOCK_FIELDS = tuple(zip(pipeline.OBSERVABLES, (
     "q", "qd", "qdd", "theta", "points", "closure_force", "closure_error", "closure_points",
     "energy", "power_in", "dissipation", "segments"), strict=True))
 """Arrays of a :class:`SampleBlock` (the compiled pipeline's outputs) and the :class:`Sample`
@@ -105,7 +105,7 @@ class SampleBlock:
     def __init__(self, model: Model, capacity: int):
         self.arrays = pipeline.new_outputs(capacity, model.n, len(model.points),
                                            len(model.closures))
-        for (key, _), arr in zip(_BLOCK_FIELDS, self.arrays, strict=True):
+        for (key, _), arr in zip(BLOCK_FIELDS, self.arrays, strict=True):
             setattr(self, key, arr)
         self.t = np.zeros(capacity)
         self.effort = np.zeros(model.n)
@@ -117,13 +117,13 @@ class SampleBlock:
     def put(self, i: int, s: Sample) -> None:
         """Store sample ``s`` as row ``i``."""
         self.t[i] = s.t
-        for key, attr in _BLOCK_FIELDS:
+        for key, attr in BLOCK_FIELDS:
             getattr(self, key)[i] = getattr(s, attr)
 
     def sample(self, i: int) -> Sample:
         """Row ``i`` as a :class:`Sample` of its own (copies: the block is refilled later)."""
         return Sample(t=float(self.t[i]), effort=self.effort.copy(),
-                      **{attr: getattr(self, key)[i].copy() for key, attr in _BLOCK_FIELDS})
+                      **{attr: getattr(self, key)[i].copy() for key, attr in BLOCK_FIELDS})
 
 
 class Simulator:

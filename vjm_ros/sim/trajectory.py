@@ -15,17 +15,19 @@ from pathlib import Path
 import numpy as np
 
 from vjm_ros.core.model import ANGLE, Model
-from vjm_ros.sim.simulator import Sample, SampleBlock
+from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
+from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
 
 ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
 
 
-_SAMPLE_FIELDS = (
-    ("t", "t"), ("q", "q"), ("qd", "qd"), ("qdd", "qdd"), ("effort", "effort"),
-    ("theta", "theta"), ("points", "points"), ("force", "closure_force"),
-    ("error", "closure_error"), ("energy", "energy"), ("power", "power_in"),
-    ("dissipation", "dissipation"), ("segments", "segments"),
-)
+_STORED = ("q", "qd", "qdd", "theta", "points", "force", "error", "energy", "power",
+           "dissipation", "segments")
+"""Arrays of a :class:`~vjm_ros.sim.simulator.SampleBlock` the trajectory keeps (all but the
+closures' points of application), with the block's names."""
+
+_SAMPLE_FIELDS = (("t", "t"), ("effort", "effort")) + tuple(
+    (key, attr) for key, attr in BLOCK_FIELDS if key in _STORED)
 """Columns of the trajectory buffer and the :class:`~vjm_ros.sim.simulator.Sample` field each
 one takes."""
 
@@ -43,22 +45,10 @@ class Trajectory:
     def __init__(self, model: Model, capacity: int = 1024):
         self.model = model
         self._rows = 0
-        n, k = model.n, len(model.closures)
-        self._buf = {
-            "t": np.zeros(capacity),
-            "q": np.zeros((capacity, n)),
-            "qd": np.zeros((capacity, n)),
-            "qdd": np.zeros((capacity, n)),
-            "effort": np.zeros((capacity, n)),
-            "theta": np.zeros((capacity, n)),
-            "points": np.zeros((capacity, len(model.points), 2)),
-            "force": np.zeros((capacity, k, 3)),
-            "error": np.zeros((capacity, k)),
-            "energy": np.zeros((capacity, 4)),
-            "power": np.zeros(capacity),
-            "dissipation": np.zeros(capacity),
-            "segments": np.zeros((capacity, n, 2, 2)),
-        }
+        shapes = dict(zip(OBSERVABLES, observable_shapes(
+            model.n, len(model.points), len(model.closures)), strict=True))
+        shapes.update(t=(), effort=(model.n,))
+        self._buf = {key: np.zeros((capacity,) + shapes[key]) for key, _ in _SAMPLE_FIELDS}
 
     def __len__(self) -> int:
         return self._rows
