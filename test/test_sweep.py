@@ -134,8 +134,13 @@ def test_scene_parameters_change_the_mechanism(engine, tmp_path):
 
 
 def _children(pid: int) -> set[int]:
+    """Descendants of ``pid`` (a process that exits meanwhile has none)."""
     out = set()
-    for task in Path(f"/proc/{pid}/task").glob("*"):
+    try:
+        tasks = list(Path(f"/proc/{pid}/task").glob("*"))
+    except OSError:  # it exited between being listed and being read
+        return out
+    for task in tasks:
         try:
             out |= {int(x) for x in (task / "children").read_text().split()}
         except OSError:
@@ -143,6 +148,14 @@ def _children(pid: int) -> set[int]:
     for child in list(out):
         out |= _children(child)
     return out
+
+
+def _cmdline(pid: int) -> bytes | None:
+    """The start of a live process's command line; None once it has exited."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()[:200]
+    except OSError:
+        return None
 
 
 def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
@@ -180,8 +193,8 @@ def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
     deadline = time.monotonic() + 30  # a hang guard: processes need a moment to exit
     while time.monotonic() < deadline and any(Path(f"/proc/{p}").exists() for p in workers):
         time.sleep(0.1)
-    alive = {p: Path(f"/proc/{p}/cmdline").read_bytes()[:200] for p in workers
-             if Path(f"/proc/{p}").exists()}
+    alive = {p: _cmdline(p) for p in workers}
+    alive = {p: c for p, c in alive.items() if c is not None}
     assert workers and not alive, alive
 
 

@@ -84,7 +84,10 @@ def measure(scene: str, seconds: float, extra: list[str]) -> dict:
     """One live run of ``seconds`` with the controller in the loop."""
     ctrl = LoopController(scene)
     try:
-        summary = run_node(node_command(scene, RATE, seconds, True, extra))
+        # the node holds its start state until the controller's first command: the run starts
+        # once the two have found each other, however long discovery takes on a loaded machine
+        summary = run_node(node_command(scene, RATE, seconds, True,
+                                        ["wait_for_command:=true", *extra]))
     finally:
         got = ctrl.close()
     lags = got["lags"]
