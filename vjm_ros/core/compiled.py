@@ -141,6 +141,7 @@ class FastMechanism(Mechanism):
         self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
         self._buffers = self._new_buffers()
         self._work = K.workspace(n, r)
+        self._tick_state = pipeline.tick_state(n)
         self._rows = r
         super().__init__(model, method)
         self.closures = FastClosureSet(model)
@@ -427,7 +428,7 @@ class FastMechanism(Mechanism):
         done, code = pipeline.advance_ticks(
             int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
             bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal, out,
-            self._work,
+            self._work, self._tick_state,
         )
         stages = 4 if method == K.RK4 else 1
         reused = max(done - 1, 0) if method == K.RK4 else 0  # first stages taken from samples

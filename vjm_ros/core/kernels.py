@@ -101,7 +101,7 @@ N_CROW = 7
 
 
 # ---------------------------------------------------------------------------------- geometry
-@_jit
+@_jit(allocates=False)
 def point_motion(kin, link, s, w):
     """Position, velocity and bias acceleration of the point ``(s, w)`` of ``link``.
 
@@ -128,7 +128,7 @@ def point_motion(kin, link, s, w):
     )
 
 
-@_jit
+@_jit(allocates=False)
 def add_point_jacobian(jac, row, cx, cy, link, px, py, lint, kin):
     """Add ``cx dPx/dq + cy dPy/dq`` of the point ``P = (px, py)`` of ``link`` to ``jac[row]``.
 
@@ -146,7 +146,7 @@ def add_point_jacobian(jac, row, cx, cy, link, px, py, lint, kin):
         jac[row, k] += cx * jx + cy * jy
 
 
-@_jit
+@_jit(allocates=False)
 def add_angle_jacobian(jac, row, sign, link, lint):
     """Add ``sign * d theta_link / dq`` to ``jac[row]`` (nothing for the ground)."""
     if link < 0:
@@ -156,7 +156,7 @@ def add_angle_jacobian(jac, row, sign, link, lint):
             jac[row, k] += sign
 
 
-@_jit
+@_jit(allocates=False)
 def _com_column(lint, kin, k, cx, cy):
     """Column ``k`` of a point's translational Jacobian at ``(cx, cy)``: ``z x (P - O_k)`` for a
     revolute coordinate, the slide direction for a prismatic one."""
@@ -165,7 +165,7 @@ def _com_column(lint, kin, k, cx, cy):
     return -kin[k, K_PSIN], kin[k, K_PCOS]
 
 
-@_jit
+@_jit(allocates=False)
 def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, crow, jac,
           points):
     """Kinematics, dynamics and closure rows at ``(q, qd)`` into the output buffers.
@@ -394,7 +394,7 @@ def workspace(n: int, r: int) -> tuple[np.ndarray, ...]:
             np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n))
 
 
-@_jit
+@_jit(allocates=False)
 def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
          kin, mm, bias, cm, crow, jac, points, out_a, out_b, work, known, row):
     """The compiled entry point (what each ``op`` does: :func:`run`), with its scratch arrays

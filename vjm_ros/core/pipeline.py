@@ -64,7 +64,7 @@ BEYOND_LIMIT = 3
 """A closure residual after the failing tick exceeds the divergence limit."""
 
 
-@_jit
+@_jit(allocates=False)
 def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
@@ -149,9 +149,15 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     return status
 
 
-@_jit
+def tick_state(n: int) -> tuple[np.ndarray, ...]:
+    """Scratch state vectors of :func:`advance_ticks` for ``n`` coordinates (built once per
+    mechanism, so the compiled call creates no arrays)."""
+    return tuple(np.empty(n) for _ in range(5))
+
+
+@_jit(allocates=False)
 def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, buffers,
-                  lengths, plink, plocal, out, work):
+                  lengths, plink, plocal, out, work, state):
     """``ticks`` control ticks of ``substeps`` steps of ``method``, each observed.
 
     Parameters
@@ -173,6 +179,8 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         Largest accepted closure residual, m or rad (``inf``: no check).
     model, buffers, lengths, plink, plocal, out, work
         As in :func:`observe`.
+    state : tuple
+        Five scratch vectors of shape (n,) from :func:`tick_state`.
 
     Returns
     -------
@@ -185,11 +193,11 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     lint, lflt, cint, cflt, gains, par = model
     kin, mm, bias, cm, crow, jac, cpts = buffers
     n = q0.shape[0]
-    q = q0.copy()
-    qd = qd0.copy()
-    qa = np.empty(n)
-    qb = np.empty(n)
-    zero = np.zeros(n)
+    q, qd, qa, qb, zero = state
+    for j in range(n):
+        q[j] = q0[j]
+        qd[j] = qd0[j]
+        zero[j] = 0.0
     k = cint.shape[0]
     o_qdd = out[2]
     o_error = out[6]

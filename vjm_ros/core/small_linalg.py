@@ -10,7 +10,7 @@ import math
 from vjm_ros.core.jit import jit as _jit
 
 
-@_jit
+@_jit(allocates=False)
 def lu_factor(a, piv):
     """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``).
 
@@ -49,7 +49,7 @@ def lu_factor(a, piv):
     return status
 
 
-@_jit
+@_jit(allocates=False)
 def lu_solve(a, piv, b):
     """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor`'s output."""
     n = a.shape[0]
@@ -71,7 +71,7 @@ def lu_solve(a, piv, b):
         b[i] = s / a[i, i]
 
 
-@_jit
+@_jit(allocates=False)
 def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec):
     """``M^-1 A^T lambda`` with ``lambda`` the minimum-norm solution of ``A M^-1 A^T lambda = c``.
 
@@ -186,7 +186,7 @@ def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec):
     _apply(minv_at, lam, out, n, r)
 
 
-@_jit
+@_jit(allocates=False)
 def _apply(minv_at, lam, out, n, r):
     """``out = M^-1 A^T lambda``."""
     for j in range(n):
@@ -196,7 +196,7 @@ def _apply(minv_at, lam, out, n, r):
         out[j] = s
 
 
-@_jit
+@_jit(allocates=False)
 def _solve_if_well_conditioned(g, c, rcond, low, vec):
     """``vec[0, :r] = G^-1 c`` by Cholesky when no eigenvalue of ``G`` can fall below
     ``rcond * max eigenvalue`` (then the minimum-norm solution is the plain solution); False,
