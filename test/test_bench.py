@@ -51,6 +51,14 @@ def test_quick_cli_on_a_tiny_horizon(tmp_path):
     assert main(["--from-results", str(out / "results.json"), "--out", str(again), "--docs",
                  str(docs2)]) == 0
     assert (again / "four_bar_pareto.png").exists() and "## four_bar" in docs2.read_text()
+    # a refresh replaces the generated sections and keeps the ones written by hand
+    docs2.write_text(docs2.read_text().replace("## four_bar", "## four_bar\nstale line")
+                     + "\n## Live node\n\nmeasured by hand\n")
+    assert main(["--from-results", str(out / "results.json"), "--out", str(again), "--docs",
+                 str(docs2)]) == 0
+    refreshed = docs2.read_text()
+    assert "stale line" not in refreshed and refreshed.count("## four_bar") == 1
+    assert refreshed.rstrip().endswith("## Live node\n\nmeasured by hand")
 
 
 def test_diverged_rows_are_kept(tmp_path, monkeypatch):

@@ -51,6 +51,36 @@ def _closure_stats(rows: dict[str, list[RowResult]], label: str, fixed_only: boo
     return (min(vals), max(vals), min(pos), max(pos)) if vals and pos else None
 
 
+def sections(text: str) -> dict[str, str]:
+    """The ``## `` sections of a Markdown page by heading, each with its heading line."""
+    found: dict[str, str] = {}
+    head, body = None, []
+    for line in text.splitlines(keepends=True):
+        if line.startswith("## "):
+            if head is not None:
+                found[head] = "".join(body)
+            head, body = line[3:].strip(), [line]
+        elif head is not None:
+            body.append(line)
+    if head is not None:
+        found[head] = "".join(body)
+    return found
+
+
+def merge_kept_sections(generated: str, previous: str) -> str:
+    """``generated`` followed by the sections of ``previous`` it does not write itself.
+
+    ``docs/accuracy.md`` also holds figures from other studies (the live node, start time,
+    logs), written by hand from their own commands; refreshing the bench keeps them.
+    """
+    own = sections(generated)
+    kept = [body.rstrip("\n") + "\n" for head, body in sections(previous).items()
+            if head not in own]
+    if not kept:
+        return generated
+    return generated.rstrip("\n") + "\n\n" + "\n".join(kept)
+
+
 def render_docs(results: dict, rows: dict[str, list[RowResult]]) -> str:
     """``docs/accuracy.md``: findings, figures and recommended settings."""
     meta = results["meta"]

@@ -27,6 +27,7 @@ from vjm_ros.studies.bench.analysis import (
     recommend_overall,
 )
 from vjm_ros.studies.bench.docs import (
+    merge_kept_sections,
     render_docs,
 )
 from vjm_ros.studies.bench.grid import (
@@ -338,4 +339,5 @@ def write_outputs(results: dict, rows: dict[str, list[RowResult]], opts: BenchOp
         fig_dir.mkdir(parents=True, exist_ok=True)
         for fname in figures.values():
             shutil.copyfile(out / fname, fig_dir / fname)
-        docs.write_text(render_docs(results, rows))
+        previous = docs.read_text() if docs.exists() else ""
+        docs.write_text(merge_kept_sections(render_docs(results, rows), previous))
