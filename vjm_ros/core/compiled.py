@@ -51,7 +51,7 @@ from vjm_ros.core.integrators.fixed import (
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.mechanism import Evaluation, Mechanism
 from vjm_ros.core.model import Model
-from vjm_ros.core.packing import pack_method, pack_model
+from vjm_ros.core.packing import chain_blocks, pack_method, pack_model
 
 KERNELS = ("auto", "numba", "numpy")
 """Accepted values of the ``kernel`` choice: compiled when available, compiled, numpy reference."""
@@ -140,7 +140,7 @@ class FastMechanism(Mechanism):
         n, r, k = model.n, model.n_rows, len(model.closures)
         self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
         self._buffers = self._new_buffers()
-        self._work = K.workspace(n, r)
+        self._work = K.workspace(n, r, chain_blocks(model))
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         super().__init__(model, method)

@@ -57,7 +57,13 @@ import numpy as np
 
 from vjm_ros.core.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
 from vjm_ros.core.jit import jit as _jit
-from vjm_ros.core.small_linalg import lu_factor, lu_solve, min_norm_correction
+from vjm_ros.core.small_linalg import (
+    lu_factor,
+    lu_factor_blocks,
+    lu_solve,
+    lu_solve_blocks,
+    min_norm_correction,
+)
 
 HINGE = 0
 SLIDER = 1
@@ -385,13 +391,21 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, -1)
 
 
-def workspace(n: int, r: int) -> tuple[np.ndarray, ...]:
+def workspace(n: int, r: int, blocks: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows (built in
-    Python once per mechanism: compiled callers receive it, so nothing is allocated per call)."""
+    Python once per mechanism: compiled callers receive it, so nothing is allocated per call).
+
+    ``blocks``: boundaries ``0, ..., n`` of the mass matrix's diagonal blocks, one per chain
+    (:func:`vjm_ros.core.packing.chain_blocks`); omitted, ``M`` is taken as one dense block.
+    """
     m = max(n, r)
+    if blocks is None:
+        blocks = np.array([0, n], dtype=np.int64)
+    blocks = np.ascontiguousarray(blocks, dtype=np.int64)
     return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
             np.empty((r, r)), np.empty((3, m)), np.empty(r), np.empty(n), np.zeros((4, n)),
-            np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n))
+            np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n), blocks,
+            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64))
 
 
 @_jit(allocates=False)
@@ -405,7 +419,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     it: the same numbers, one evaluation fewer); ``row = -1``: nothing known."""
     n = q0.shape[0]
     r = crow.shape[0]
-    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero = work
+    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch = work
     q = out_a
     qd = out_b
     for j in range(n):
@@ -439,8 +453,9 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
             for i in range(n):
                 for j in range(n):
                     lu[i, j] = mm[i, j]
-            status = max(status, lu_factor(lu, piv))
-            min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec)
+            status = max(status, lu_factor_blocks(lu, piv, blocks))
+            min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec, blocks,
+                                touch)
             if position:
                 for j in range(n):
                     q[j] = q[j] - corr[j]
@@ -478,7 +493,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
             for i in range(n):
                 for j in range(n):
                     lu[i, j] = mm[i, j]
-            status = max(status, lu_factor(lu, piv))
+            status = max(status, lu_factor_blocks(lu, piv, blocks))
             if not exact:
                 for i in range(r):
                     crow[i, R_FORCE] = -(gains[i, 0] * crow[i, R_RES] + gains[i, 1] * crow[i, R_RATE])
@@ -490,7 +505,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         t += jac[i, j] * crow[i, R_FORCE]
                     s = s + t
                 acc[j] = s
-            lu_solve(lu, piv, acc)
+            lu_solve_blocks(lu, piv, acc, blocks)
             if exact:
                 # A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)
                 two_alpha = 2.0 * par[P_ALPHA]
@@ -501,7 +516,8 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         s += jac[i, j] * acc[j]
                     rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
                                + beta2 * crow[i, R_RES])
-                min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec)
+                min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec,
+                                    blocks, touch)
                 for i in range(r):
                     crow[i, R_FORCE] = vec[0, i]
                 for j in range(n):

@@ -96,3 +96,22 @@ def pack_method(
         par[K.P_RCOND] = method.rcond
     par[K.P_GX : K.P_GY + 1] = np.asarray(model.gravity, dtype=float).reshape(2)
     return gains, par
+
+
+def chain_blocks(model: Model) -> np.ndarray:
+    """Boundaries of the mass matrix's diagonal blocks, one block per chain.
+
+    Chains are independent open chains (closures act only through forces), so ``M`` has no
+    entry between coordinates of two chains.
+
+    Returns
+    -------
+    ndarray of int64, shape (chains + 1,)
+        ``0, start of chain 2, ..., n``.
+    """
+    first = np.asarray(model.first_of_chain, dtype=bool)
+    starts = [i for i in range(model.n) if first[i]]
+    if not starts or starts[0] != 0:
+        starts = [0] + starts
+    return np.array(starts + [model.n], dtype=np.int64)
+
