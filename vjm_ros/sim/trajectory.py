@@ -188,11 +188,42 @@ class Trajectory:
         return np.concatenate(parts, axis=1)
 
     def write_csv(self, path: str | Path) -> Path:
-        """Write ``trajectory.csv`` (full double precision)."""
+        """Write ``trajectory.csv`` (full double precision).
+
+        Every value is written as ``repr(float(value))`` (the shortest text that reads back to the
+        same double), rows end with ``\\r\\n`` as :mod:`csv` writes them. The body is formatted
+        in batches of :data:`CSV_BATCH_ROWS` rows by one ``repr`` of a nested list each, which
+        writes the same text as a row-by-row :mod:`csv` writer (test/test_trajectory_csv.py).
+        """
         path = Path(path)
         with path.open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(self.columns())
-            for row in self.table():
-                w.writerow([repr(float(x)) for x in row])
+            csv.writer(fh).writerow(self.columns())
+            table = self.table()
+            for start in range(0, len(table), CSV_BATCH_ROWS):
+                fh.write(csv_rows(table[start : start + CSV_BATCH_ROWS]))
         return path
+
+
+CSV_BATCH_ROWS = 4096
+"""Rows of ``trajectory.csv`` formatted at once (bounds the text held in memory, ~2 MB)."""
+
+
+def csv_rows(table: np.ndarray) -> str:
+    """CSV text of the rows of ``table``: values as ``repr(float(value))``, ``\\r\\n`` line ends.
+
+    Parameters
+    ----------
+    table : ndarray, shape (rows, columns)
+        At least one column.
+
+    Returns
+    -------
+    str
+        ``""`` for no rows. Float reprs (``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf``) hold no
+        comma, bracket or space, so splitting the nested list's repr at ``"], ["`` and ``", "``
+        gives the rows and values exactly.
+    """
+    if len(table) == 0:
+        return ""
+    text = repr(np.asarray(table, dtype=float).tolist())
+    return text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n"
