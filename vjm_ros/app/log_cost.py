@@ -1,0 +1,104 @@
+"""What the logs of ``vjm run`` cost against the physics-only run of the same scene and settings.
+
+``python -m vjm_ros.app.log_cost [--scene four_bar] [--seconds 10] [--rounds 5]`` runs, in
+this process and interleaved round by round, ``vjm run`` (the parsed command, without start-up and
+argument parsing) of one scene with rk4 at 1 kHz and exact closure:
+
+1. **physics**: no output;
+2. **+csv**: ``--out`` (``trajectory.csv`` and ``summary.json``);
+3. **+mcap**: ``--mcap``;
+4. **+rrd**: ``--rrd`` to a file;
+5. **all**: ``--out --mcap --rrd``.
+
+It prints the best wall time of each (ms per simulated second) and its ratio to the physics-only
+run (issue target for *all*: at most 1.5). A first round, not counted, loads the compiled code and
+the log libraries. Wall times on a shared 2-core machine vary 2-4x from run to run: compare the
+ratios of one run. ``--json`` prints the figures as one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import tempfile
+import time
+from pathlib import Path
+
+CONFIGS = ("physics", "+csv", "+mcap", "+rrd", "all")
+
+
+def _options(config: str, folder: Path) -> list[str]:
+    """The ``vjm run`` options of one configuration, writing into ``folder``."""
+    out = ["--out", str(folder / "out")]
+    mcap = ["--mcap", str(folder / "run.mcap")]
+    rrd = ["--rrd", str(folder / "run.rrd")]
+    return {"physics": [], "+csv": out, "+mcap": mcap, "+rrd": rrd,
+            "all": out + mcap + rrd}[config]
+
+
+def run_once(scene: str, seconds: float, config: str, folder: Path) -> float:
+    """Wall seconds of one ``vjm run`` (rk4, 1 kHz, exact closure) with the logs of ``config``."""
+    from vjm_ros.app import cli
+
+    argv = ["run", scene, "--integrator", "rk4", "--rate", "1000", "--substeps", "1",
+            "--closure", "exact", "--duration", str(seconds), "--json"]
+    args = cli._parser().parse_args(argv + _options(config, folder))
+    with contextlib.redirect_stdout(io.StringIO()):
+        t0 = time.perf_counter()
+        code = cli._cmd_run(args)
+        wall = time.perf_counter() - t0
+    if code != 0:
+        raise RuntimeError(f"vjm run {' '.join(argv)} ({config}) ended with exit code {code}")
+    return wall
+
+
+def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> dict:
+    """Best wall time per configuration over ``rounds`` interleaved rounds.
+
+    Returns
+    -------
+    dict
+        ``ms_per_sim_s`` and ``ratio`` (to the physics-only run) per configuration of
+        :data:`CONFIGS`, with the scene, the simulated seconds and the rounds.
+    """
+    best = dict.fromkeys(CONFIGS, float("inf"))
+    with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
+        folder = Path(tmp)
+        for config in CONFIGS:  # warm-up: compiled code, log libraries
+            run_once(scene, min(seconds, 0.5), config, folder)
+        for _ in range(rounds):
+            for config in CONFIGS:
+                best[config] = min(best[config], run_once(scene, seconds, config, folder))
+    physics = best["physics"]
+    return {
+        "scene": scene,
+        "seconds": seconds,
+        "rounds": rounds,
+        "ms_per_sim_s": {c: 1e3 * best[c] / seconds for c in CONFIGS},
+        "ratio": {c: best[c] / physics for c in CONFIGS},
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command line entry: measure and print the table (or JSON)."""
+    p = argparse.ArgumentParser(prog="python -m vjm_ros.app.log_cost", description=__doc__)
+    p.add_argument("--scene", default="four_bar")
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run")
+    p.add_argument("--rounds", type=int, default=5, help="interleaved rounds (best is kept)")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = p.parse_args(argv)
+    r = measure(args.scene, args.seconds, args.rounds)
+    if args.json:
+        print(json.dumps(r))
+        return 0
+    print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds")
+    print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
+    for c in CONFIGS:
+        print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
