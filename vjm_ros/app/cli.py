@@ -289,8 +289,7 @@ def _cmd_run(args) -> int:
                 finally:  # the ticks before a divergence are kept
                     traj.extend(block)
                     if logs.active:
-                        for i in range(len(block)):
-                            logs.write(block.sample(i))
+                        logs.write_block(block)
                 progress.update(sim.t)
         except DivergenceError as exc:
             code, error = EXIT_DIVERGED, str(exc)

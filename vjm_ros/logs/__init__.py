@@ -1,7 +1,9 @@
 """Logs of a simulation: MCAP (ROS 2 profile) and rerun recordings, usable without ROS.
 
-Both recorders share one API: ``write(sample)`` after every tick, ``note_reset(t)`` when the
-simulator is reset, ``close()`` (idempotent) or use as a context manager::
+Both recorders share one API: ``write(sample)`` after every tick (or ``write_block(block)`` after
+a :class:`~vjm_ros.sim.simulator.SampleBlock` of ticks: the same log, encoded in bulk),
+``note_reset(t)`` when the simulator is reset, ``close()`` (idempotent) or use as a context
+manager::
 
     from vjm_ros.logs import McapRecorder, finalize_on_signals
 
@@ -20,6 +22,8 @@ The heavy dependencies (``mcap``, ``rerun``) are imported only when a recorder c
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
 
@@ -107,6 +111,19 @@ class Timebase:
         ns = self.offset_ns + int(round(t * 1e9))
         if self.last_ns is None or ns > self.last_ns:
             self.last_ns = ns
+        return ns
+
+    def to_ns_array(self, t: np.ndarray) -> np.ndarray:
+        """:meth:`to_ns` of consecutive times ``t`` (s, increasing) at once.
+
+        Returns
+        -------
+        ndarray of int64, shape (T,)
+            The same values as ``to_ns`` one by one (``rint`` rounds half to even, as ``round``).
+        """
+        ns = self.offset_ns + np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64)
+        if len(ns) and (self.last_ns is None or ns[-1] > self.last_ns):
+            self.last_ns = int(ns[-1])
         return ns
 
     def reset(self, t: float | None = None) -> int:

@@ -294,6 +294,51 @@ class RerunRecorder(Recorder):
         if self._count == self.batch or time.monotonic() - self._last_send >= self.batch_seconds:
             self.send()
 
+    @atomic
+    def write_block(self, block) -> None:
+        """Buffer every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` by array slices.
+
+        Logs what :meth:`write` of each row would (the same buffers, sends and geometry), except
+        that the wall-time condition of a send is checked once per block.
+        """
+        self._check_open()
+        rows = len(block)
+        ns = self.timebase.to_ns_array(block.t[:rows])
+        first = self.samples
+        done = 0
+        while done < rows:
+            i = self._count
+            take = min(self.batch - i, rows - done)
+            part = slice(done, done + take)
+            self._t[i : i + take] = ns[part]
+            self._q[i : i + take] = block.q[part]
+            self._qd[i : i + take] = block.qd[part]
+            self._force[i : i + take] = block.force[part]
+            self._energy[i : i + take] = block.energy[part]
+            self._error[i : i + take] = block.error[part]
+            self._count = i + take
+            self._keep_geometry(block, ns, first, part)
+            done += take
+            if self._count == self.batch:
+                self.send()
+        self.samples = first + rows
+        if time.monotonic() - self._last_send >= self.batch_seconds:
+            self.send()
+
+    def _keep_geometry(self, block, ns: np.ndarray, first: int, rows: slice) -> None:
+        """The drawing of every ``geometry_every``-th sample among ``rows`` of a block (copies:
+        blocks are refilled), and the chrono-cyclograph's poses among them; ``first`` is the
+        number of samples written before the block."""
+        start = rows.start + (-(first + rows.start) % self.geometry_every)
+        for i in range(start, rows.stop, self.geometry_every):
+            t = int(ns[i])
+            segments = block.segments[i].copy()
+            self._geo.append((t, segments, block.points[i].copy(), block.cpoints[i].copy(),
+                              block.force[i].copy()))
+            if self.cyclograph_ns > 0 and t >= self._next_cyclograph_ns:
+                self._cyc.append((t, segments))
+                self._next_cyclograph_ns = t + self.cyclograph_ns
+
     def send(self) -> None:
         """Send everything buffered so far."""
         c = self._count

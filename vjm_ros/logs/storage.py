@@ -106,6 +106,19 @@ class LogWriters:
             except OSError as exc:
                 self._give_up(rec, exc)
 
+    def write_block(self, block) -> None:
+        """Write every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` to every working
+        recorder: in bulk where the recorder has ``write_block``, else sample by sample."""
+        for rec in list(self.active):
+            try:
+                if hasattr(rec, "write_block"):
+                    rec.write_block(block)
+                else:
+                    for i in range(len(block)):
+                        rec.write(block.sample(i))
+            except OSError as exc:
+                self._give_up(rec, exc)
+
     def note_reset(self, t: float) -> None:
         """Tell every working recorder about a simulator reset at ``t`` (s)."""
         for rec in list(self.active):
