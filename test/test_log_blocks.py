@@ -9,6 +9,7 @@ are covered. Equality is exact: the same times and the same doubles.
 
 from __future__ import annotations
 
+import types
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
+from vjm_ros.logs import mcap_recorder
+from vjm_ros.logs.mcap_recorder import McapRecorder
 from vjm_ros.logs.rerun_recorder import RerunRecorder
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
@@ -76,6 +79,30 @@ def write_both(make, first, blocks, reset_after: int = 2):
             rec.write_block(block)
             if b == reset_after:
                 rec.note_reset(float(block.t[len(block) - 1]))
+
+
+# ---------------------------------------------------------------- MCAP
+@pytest.mark.parametrize("marker_every", [10, 7, 0])
+def test_mcap_blocks_write_the_same_file(run, tmp_path, monkeypatch, marker_every):
+    """The whole file, byte for byte: every message's payload, time, sequence and order, the
+    chunks (closed after the same ticks), message indexes, statistics and bag metadata.
+
+    The recorder's clocks are frozen (the attachment's creation time and the wall-time condition
+    of a chunk are the only things that depend on them); chunks of 30 ms put several chunk ends
+    inside each block.
+    """
+    scene, sim, first, blocks = run
+    monkeypatch.setattr(mcap_recorder, "time",
+                        types.SimpleNamespace(monotonic=lambda: 0.0, time_ns=lambda: 7))
+
+    def make(name):
+        (tmp_path / name).mkdir()
+        return McapRecorder(tmp_path / name / "run.mcap", scene.model, sim.describe(),
+                            scene.text, marker_every=marker_every, chunk_seconds=0.03)
+
+    write_both(make, first, blocks)
+    by_samples = (tmp_path / "samples" / "run.mcap").read_bytes()
+    assert (tmp_path / "blocks" / "run.mcap").read_bytes() == by_samples
 
 
 # ---------------------------------------------------------------- rerun

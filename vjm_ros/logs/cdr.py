@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import struct
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -159,7 +160,11 @@ def _color(w: CdrWriter, c: dict) -> None:
     w.float32x4((c["r"], c["g"], c["b"], c["a"]))
 
 
-def _marker(w: CdrWriter, m: dict) -> None:
+def _marker(w: CdrWriter, m: dict, marks: list[int] | None = None) -> None:
+    """One Marker; with ``marks``, append the byte offsets of its stamp and of its points."""
+    if marks is not None:
+        w.align(4)  # where the stamp's int32 goes (no padding beyond what it would write)
+        marks.append(len(w.buf))
     _header(w, m["header"])
     w.string(m["ns"])
     w.int32(m["id"])
@@ -175,6 +180,10 @@ def _marker(w: CdrWriter, m: dict) -> None:
     w.uint8(m["frame_locked"])
     points = m["points"]
     w.uint32(len(points))
+    if marks is not None:
+        if points:
+            w.align(8)  # where the first point's float64 goes
+        marks.append(len(w.buf))
     for p in points:
         _xyz(w, p)
     colors = m["colors"]
@@ -221,6 +230,7 @@ class _Tail:
     def __init__(self, start: int):
         self.fmt = "<"
         self.off = start
+        self.arrays: list[tuple[int, int]] = []  # (offset in the message, count) per float64 run
 
     def align(self, size: int) -> None:
         pad = -self.off % size
@@ -236,6 +246,7 @@ class _Tail:
     def float64s(self, count: int) -> None:
         if count:
             self.align(8)
+            self.arrays.append((self.off + len(_ENCAPSULATION), count))
             self.fmt += f"{count}d"
             self.off += 8 * count
 
@@ -256,6 +267,20 @@ def _after_stamp(frame_id: str) -> bytes:
     return encode("std_msgs/msg/String", {"data": frame_id})[4:]
 
 
+def _joint_state_parts(names: Sequence[str], frame_id: str) -> tuple[bytes, _Tail]:
+    """Constant bytes of a JointState after its stamp, and the layout of its three arrays."""
+    empty = encode("sensor_msgs/msg/JointState", {
+        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": frame_id},
+        "name": list(names), "position": [], "velocity": [], "effort": [],
+    })
+    middle = empty[12:-12]  # after encapsulation and stamp, before the three empty sequences
+    tail = _Tail(len(empty) - 12 - 4)
+    for _ in range(3):
+        tail.uint32()
+        tail.float64s(len(names))
+    return middle, tail
+
+
 def joint_state_encoder(
     names: Sequence[str], frame_id: str = "world"
 ) -> Callable[[int, np.ndarray, np.ndarray, np.ndarray], bytes]:
@@ -273,16 +298,8 @@ def joint_state_encoder(
         ``f(ns, position, velocity, effort) -> bytes`` with arrays of shape (len(names),); the
         result equals :func:`encode` of the corresponding dict.
     """
-    empty = encode("sensor_msgs/msg/JointState", {
-        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": frame_id},
-        "name": list(names), "position": [], "velocity": [], "effort": [],
-    })
-    middle = empty[12:-12]  # after encapsulation and stamp, before the three empty sequences
+    middle, tail = _joint_state_parts(names, frame_id)
     n = len(names)
-    tail = _Tail(len(empty) - 12 - 4)
-    for _ in range(3):
-        tail.uint32()
-        tail.float64s(n)
     pack = tail.struct().pack
 
     def encode_joint_state(ns: int, position, velocity, effort) -> bytes:
@@ -296,6 +313,15 @@ def joint_state_encoder(
         )
 
     return encode_joint_state
+
+
+def _multi_array_parts(layout: dict, size: int) -> tuple[bytes, _Tail]:
+    """Constant bytes of a Float64MultiArray before its data, and the layout of the data."""
+    prefix = encode("std_msgs/msg/Float64MultiArray", {"layout": layout, "data": []})[:-4]
+    tail = _Tail(len(prefix) - 4)
+    tail.uint32()
+    tail.float64s(size)
+    return prefix, tail
 
 
 def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes]:
@@ -313,16 +339,21 @@ def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes
     callable
         ``f(data) -> bytes`` with ``data`` of shape (size,).
     """
-    prefix = encode("std_msgs/msg/Float64MultiArray", {"layout": layout, "data": []})[:-4]
-    tail = _Tail(len(prefix) - 4)
-    tail.uint32()
-    tail.float64s(size)
+    prefix, tail = _multi_array_parts(layout, size)
     pack = tail.struct().pack
 
     def encode_multi_array(data) -> bytes:
         return prefix + pack(size, *data)
 
     return encode_multi_array
+
+
+def _wrench_parts(frame_id: str) -> tuple[bytes, _Tail]:
+    """Constant bytes of a WrenchStamped after its stamp, and the layout of its six doubles."""
+    middle = _after_stamp(frame_id)
+    tail = _Tail(8 + len(middle))
+    tail.float64s(6)
+    return middle, tail
 
 
 def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, float, float], bytes]:
@@ -333,9 +364,7 @@ def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, flo
     callable
         ``f(ns, fx, fy, mz) -> bytes``: force ``(fx, fy, 0)`` N, torque ``(0, 0, mz)`` N m.
     """
-    middle = _after_stamp(frame_id)
-    tail = _Tail(8 + len(middle))
-    tail.float64s(6)
+    middle, tail = _wrench_parts(frame_id)
     pack = tail.struct().pack
 
     def encode_wrench(ns: int, fx: float, fy: float, mz: float) -> bytes:
@@ -349,3 +378,84 @@ def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, flo
 def encode_clock(ns: int) -> bytes:
     """``rosgraph_msgs/Clock`` at ``ns`` nanoseconds."""
     return _ENCAPSULATION + _STAMP(*_stamp_parts(ns))
+
+
+# ---------------------------------------------------------------- byte images for blocks
+STAMP_OFFSET = len(_ENCAPSULATION)
+"""Byte offset of the header stamp (``int32`` sec, ``uint32`` nanosec) in a stamped message."""
+
+
+@dataclass(frozen=True)
+class FixedLayout:
+    """Byte image of a fixed-layout message: its bytes with zero stamps and numbers, and where
+    the numbers go, so that many messages can be written into copies of the image at once.
+
+    Attributes
+    ----------
+    template : bytes
+        The message (encapsulation header included) with stamps 0 and every number 0.0.
+    stamps : tuple of int
+        Byte offsets of the header stamps (``int32`` sec, ``uint32`` nanosec), all of which
+        carry the message's time.
+    arrays : tuple of (int, int)
+        ``(byte offset, count)`` of each run of ``float64`` values, in the order of the
+        per-message encoder's arguments.
+    """
+
+    template: bytes
+    stamps: tuple[int, ...]
+    arrays: tuple[tuple[int, int], ...]
+
+
+def joint_state_layout(names: Sequence[str], frame_id: str = "world") -> FixedLayout:
+    """:class:`FixedLayout` of :func:`joint_state_encoder`: position, velocity, effort runs."""
+    _, tail = _joint_state_parts(names, frame_id)
+    z = [0.0] * len(names)
+    template = joint_state_encoder(names, frame_id)(0, z, z, z)
+    return FixedLayout(template, (STAMP_OFFSET,), tuple(tail.arrays))
+
+
+def multi_array_layout(layout: dict, size: int) -> FixedLayout:
+    """:class:`FixedLayout` of :func:`multi_array_encoder`: one run of ``size`` values."""
+    _, tail = _multi_array_parts(layout, size)
+    return FixedLayout(multi_array_encoder(layout, size)([0.0] * size), (), tuple(tail.arrays))
+
+
+def wrench_stamped_layout(frame_id: str = "world") -> FixedLayout:
+    """:class:`FixedLayout` of :func:`wrench_stamped_encoder`: runs ``(fx, fy)`` and ``(mz,)``
+    (the zero ``force.z`` and ``torque.x, y`` between them stay as in the template)."""
+    _, tail = _wrench_parts(frame_id)
+    ((offset, _),) = tail.arrays
+    template = wrench_stamped_encoder(frame_id)(0, 0.0, 0.0, 0.0)
+    return FixedLayout(template, (STAMP_OFFSET,), ((offset, 2), (offset + 5 * 8, 1)))
+
+
+CLOCK_LAYOUT = FixedLayout(encode_clock(0), (STAMP_OFFSET,), ())
+""":class:`FixedLayout` of :func:`encode_clock`."""
+
+
+def markers_layout(message: dict) -> FixedLayout:
+    """:class:`FixedLayout` of a ``MarkerArray`` whose markers keep their count, strings and
+    number of points: one stamp per marker and one run of ``3 m`` values (``x, y, z`` of ``m``
+    points) per marker, in marker order.
+
+    Parameters
+    ----------
+    message : dict
+        A ``visualization_msgs/MarkerArray`` dict (e.g. :func:`vjm_ros.logs.messages.markers`);
+        its stamps and points become zeros in the template.
+    """
+    marks: list[int] = []
+    w = CdrWriter()
+    markers = message["markers"]
+    w.uint32(len(markers))
+    for marker in markers:
+        _marker(w, marker, marks)
+    buf = bytearray(w.getvalue())
+    stamps, arrays = tuple(marks[0::2]), []
+    for marker, stamp, start in zip(markers, stamps, marks[1::2], strict=True):
+        count = 3 * len(marker["points"])
+        buf[stamp : stamp + 8] = bytes(8)
+        buf[start : start + 8 * count] = bytes(8 * count)
+        arrays.append((start, count))
+    return FixedLayout(bytes(buf), stamps, tuple(arrays))

@@ -35,8 +35,9 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
-from mcap.writer import CompressionType, IndexType, Writer
+from mcap.writer import CompressionType, IndexType
 
 from vjm_ros.core.model import Model
 from vjm_ros.logs import (
@@ -44,6 +45,7 @@ from vjm_ros.logs import (
     Timebase,
     atomic,
     cdr,
+    mcap_block,
     messages,
     msgdefs,
     package_versions,
@@ -155,7 +157,7 @@ class McapRecorder(Recorder):
         self._closure_names = list(model.closure_names)
         self._file = open(self.path, "wb")  # closed in close()
         try:
-            self._writer = Writer(
+            self._writer = mcap_block.BlockWriter(
                 self._file, chunk_size=int(chunk_bytes), compression=_COMPRESSION[compression],
                 index_types=INDEXES,
             )
@@ -193,6 +195,8 @@ class McapRecorder(Recorder):
         self._ch_energy = self._channels[t.energy]
         self._ch_clock = self._channels[t.clock]
         self._ch_wrench = [self._channels[t.wrench(name)] for name in self._closure_names]
+        self._block_encoder = mcap_block.BlockEncoder(
+            self.model, self._channels, t, self.marker_every, self.force_scale)
 
     @staticmethod
     def _library() -> str:
@@ -263,6 +267,59 @@ class McapRecorder(Recorder):
             self._put(self._channels[self.topics.markers], cdr.encode_markers(markers), ns)
         self.samples += 1
         self._maybe_flush(ns)
+
+    @atomic
+    def write_block(self, block) -> None:
+        """Log every row of a :class:`~vjm_ros.sim.simulator.SampleBlock`, encoded in bulk.
+
+        The messages, their times, sequence numbers and order equal those of :meth:`write` of
+        each row, and chunks close after the same ticks, except that the wall-time condition of
+        ``chunk_seconds`` is checked once per block.
+        """
+        self._check_open()
+        rows = len(block)
+        if rows == 0:
+            return
+        ns = self.timebase.to_ns_array(block.t[:rows])
+        data, channels, times, offsets, tick_starts = self._block_encoder.encode(
+            block, ns, self.samples)
+        view = memoryview(data)
+        start = 0
+        while start < rows:
+            stop, close = self._chunk_stop(ns, start)
+            lo, hi = int(tick_starts[start]), int(tick_starts[stop])
+            first, last = np.searchsorted(offsets, (lo, hi))
+            self._add_records(view[lo:hi], channels[first:last], times[first:last],
+                              offsets[first:last] - lo)
+            if close:
+                self.flush()
+            start = stop
+        self.samples += rows
+        if self._chunk_start_ns is not None and (
+                time.monotonic() - self._chunk_wall >= self.chunk_seconds):
+            self.flush()
+
+    def _chunk_stop(self, ns: np.ndarray, start: int) -> tuple[int, bool]:
+        """End (exclusive) of the ticks from ``start`` that go into the open chunk, and whether
+        the chunk closes after them: at the first tick ``chunk_seconds`` after the chunk's
+        first, as :meth:`_maybe_flush` decides tick by tick."""
+        first = start
+        if self._chunk_start_ns is None:
+            self._chunk_start_ns = int(ns[start])
+            first = start + 1
+        end = max(first, int(np.searchsorted(ns, self._chunk_start_ns + self.chunk_ns)))
+        if end < len(ns):
+            return end + 1, True
+        return len(ns), False
+
+    def _add_records(self, data, channels: np.ndarray, times: np.ndarray,
+                     offsets: np.ndarray) -> None:
+        self._writer.add_records(data, channels, times, offsets)
+        lo, hi = int(times.min()), int(times.max())
+        ids, counts = np.unique(channels, return_counts=True)
+        for channel, count in zip(ids.tolist(), counts.tolist(), strict=True):
+            self.bag.note_many(self._records[channel], count, lo, hi)
+        self.message_count += len(times)
 
     @atomic
     def note(self, text: str) -> None:

@@ -116,6 +116,12 @@ class BagInfo:
         if self.end_ns is None or ns > self.end_ns:
             self.end_ns = ns
 
+    def note_many(self, topic: TopicRecord, count: int, first_ns: int, last_ns: int) -> None:
+        """Count ``count`` messages of ``topic`` logged from ``first_ns`` to ``last_ns``."""
+        topic.count += count
+        self.start_ns = first_ns if self.start_ns is None else min(self.start_ns, first_ns)
+        self.end_ns = last_ns if self.end_ns is None else max(self.end_ns, last_ns)
+
     def metadata(self, file_name: str) -> dict:
         """The ``rosbag2_bagfile_information`` document for a bag of one file.
 
