@@ -21,6 +21,7 @@ The heavy dependencies (``mcap``, ``rerun``) are imported only when a recorder c
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -162,7 +163,16 @@ def tick_of(settings: dict) -> float:
 def package_versions(
     names: tuple[str, ...] = ("vjm_ros", "numpy", "scipy", "mcap", "rerun-sdk"),
 ) -> dict:
-    """Installed versions of the packages that shape a log (``"not installed"`` when absent)."""
+    """Installed versions of the packages that shape a log (``"not installed"`` when absent).
+
+    Read once per process (each log of a run stores them; reading the package metadata takes
+    milliseconds).
+    """
+    return dict(_package_versions(tuple(names)))
+
+
+@functools.cache
+def _package_versions(names: tuple[str, ...]) -> dict:
     import platform
     from importlib import metadata
 

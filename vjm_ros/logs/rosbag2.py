@@ -19,6 +19,7 @@ topic keeps 100, the scene description is transient-local, depth 1).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -74,6 +75,13 @@ LATCHED_QOS = OfferedQos(depth=1, durability=DURABILITY_TRANSIENT_LOCAL)
 
 def qos_yaml(profiles: list[OfferedQos]) -> str:
     """The ``offered_qos_profiles`` text of a channel: a YAML list of profiles."""
+    return _qos_yaml(tuple(profiles))
+
+
+@functools.cache
+def _qos_yaml(profiles: tuple[OfferedQos, ...]) -> str:
+    """:func:`qos_yaml`, dumped once per set of profiles (every channel of a log has one of two
+    and dumping YAML takes about a millisecond)."""
     return yaml.safe_dump([p.as_dict() for p in profiles], sort_keys=False).strip()
 
 
