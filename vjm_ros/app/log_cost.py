@@ -13,7 +13,9 @@ argument parsing) of one scene with rk4 at 1 kHz and exact closure:
 It prints the best wall time of each (ms per simulated second) and its ratio to the physics-only
 run (issue target for *all*: at most 1.5). A first round, not counted, loads the compiled code and
 the log libraries. Wall times on a shared 2-core machine vary 2-4x from run to run: compare the
-ratios of one run. ``--json`` prints the figures as one JSON object.
+ratios of one run. ``--json`` prints the figures as one JSON object; ``--parts`` adds the parts of
+one profiled run with all logs (physics, CSV, MCAP encoding, records and indexes, chunks and their
+compression, rerun), as shares of that run.
 """
 
 from __future__ import annotations
@@ -81,6 +83,46 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
     }
 
 
+PARTS = (
+    ("physics (advance_block)", "sim/simulator.py", "advance_block"),
+    ("csv: trajectory.csv", "sim/trajectory.py", "write_csv"),
+    ("mcap: open", "logs/mcap_recorder.py", "__init__"),
+    ("mcap: encode blocks", "logs/mcap_block.py", "encode"),
+    ("mcap: add records, index", "logs/mcap_block.py", "add_records"),
+    ("mcap: close chunks", "mcap/writer.py", "__finalize_chunk"),
+    ("mcap:   of which zstd", "zstandard/__init__.py", "compress"),
+    ("mcap: finalize file", "logs/mcap_recorder.py", "_finalize"),
+    ("rrd: open", "logs/rerun_recorder.py", "__init__"),
+    ("rrd: buffer blocks", "logs/rerun_recorder.py", "write_block"),
+    ("rrd:   of which send_columns", "logs/rerun_recorder.py", "send"),
+    ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
+)
+"""Parts of the *all* run: label, file (path suffix) and function whose cumulative time it is."""
+
+
+def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float]:
+    """Wall seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile`.
+
+    Profiling slows calls down, the more the smaller they are: read the parts as shares of the
+    profiled run (``"run"``), not as absolute times.
+    """
+    import cProfile
+    import pstats
+
+    with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
+        run_once(scene, min(seconds, 0.5), "all", Path(tmp))
+        profile = cProfile.Profile()
+        profile.enable()
+        total = run_once(scene, seconds, "all", Path(tmp))
+        profile.disable()
+    stats = pstats.Stats(profile).stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
+    out = {"run": total}
+    for label, suffix, function in PARTS:
+        out[label] = sum(v[3] for (file, _, name), v in stats.items()
+                         if name == function and file.replace("\\", "/").endswith(suffix))
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line entry: measure and print the table (or JSON)."""
     p = argparse.ArgumentParser(prog="python -m vjm_ros.app.log_cost", description=__doc__)
@@ -88,8 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run")
     p.add_argument("--rounds", type=int, default=5, help="interleaved rounds (best is kept)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
+    p.add_argument("--parts", action="store_true",
+                   help="also profile one run with all logs and print its parts")
     args = p.parse_args(argv)
     r = measure(args.scene, args.seconds, args.rounds)
+    if args.parts:
+        r["parts_s"] = breakdown(args.scene, args.seconds)
     if args.json:
         print(json.dumps(r))
         return 0
@@ -97,6 +143,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
     for c in CONFIGS:
         print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
+    if args.parts:
+        parts = r["parts_s"]
+        print(f"\nparts of one run with all logs, profiled ({1e3 * parts['run']:.0f} ms):")
+        for label, _, _ in PARTS:
+            share = parts[label] / parts["run"]
+            print(f"{label:30s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
     return 0
 
 
