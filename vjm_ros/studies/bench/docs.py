@@ -396,3 +396,40 @@ def _extremes_text() -> list[str]:
         "and dissipative (see the long runs above).",
         "",
     ]
+
+
+LOG_COST_HEADING = "## Cost of the logs of `vjm run`"
+"""Section of the page written by ``python -m vjm_ros.app.log_cost --docs``."""
+KEPT_SECTIONS = (LOG_COST_HEADING,)
+"""Sections of the page that other tools write: kept when the bench rewrites the page."""
+
+
+def section(text: str, heading: str) -> str | None:
+    """The section of a Markdown page that starts with the line ``heading``, up to the next
+    ``## `` heading (without it); None when the page has none."""
+    lines = text.splitlines(keepends=True)
+    if heading + "\n" not in lines and heading not in lines:
+        return None
+    start = next(i for i, ln in enumerate(lines) if ln.rstrip("\n") == heading)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")),
+               len(lines))
+    return "".join(lines[start:end])
+
+
+def with_section(text: str, heading: str, body: str) -> str:
+    """``text`` with its ``heading`` section replaced by ``body`` (appended when absent)."""
+    old = section(text, heading)
+    body = body.rstrip("\n") + "\n"
+    if old is None:
+        return text.rstrip("\n") + "\n\n" + body
+    tail = "\n" if text.index(old) + len(old) < len(text) else ""
+    return text.replace(old, body + tail, 1)
+
+
+def keep_sections(old_page: str, new_page: str) -> str:
+    """``new_page`` with the :data:`KEPT_SECTIONS` of ``old_page`` carried over."""
+    for heading in KEPT_SECTIONS:
+        kept = section(old_page, heading)
+        if kept is not None:
+            new_page = with_section(new_page, heading, kept)
+    return new_page
