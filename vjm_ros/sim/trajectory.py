@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vjm_ros.core import float_text
 from vjm_ros.core.model import ANGLE, Model
 from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
 from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
@@ -192,8 +193,8 @@ class Trajectory:
 
         Every value is written as ``repr(float(value))`` (the shortest text that reads back to the
         same double), rows end with ``\\r\\n`` as :mod:`csv` writes them. The body is formatted
-        in batches of :data:`CSV_BATCH_ROWS` rows by one ``repr`` of a nested list each, which
-        writes the same text as a row-by-row :mod:`csv` writer (test/test_trajectory_csv.py).
+        in batches of :data:`CSV_BATCH_ROWS` rows (:func:`csv_rows`), the same text as a row-by-row
+        :mod:`csv` writer (test/test_trajectory_csv.py).
         """
         path = Path(path)
         with path.open("w", newline="") as fh:
@@ -219,11 +220,14 @@ def csv_rows(table: np.ndarray) -> str:
     Returns
     -------
     str
-        ``""`` for no rows. Float reprs (``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf``) hold no
-        comma, bracket or space, so splitting the nested list's repr at ``"], ["`` and ``", "``
-        gives the rows and values exactly.
+        ``""`` for no rows. Compiled, :func:`vjm_ros.core.float_text.csv_bytes` writes it (about
+        six times faster); else the nested list's ``repr`` is split at ``"], ["`` and ``", "``
+        (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
+        bracket or space).
     """
     if len(table) == 0:
         return ""
+    if float_text.COMPILED:
+        return float_text.csv_bytes(table).decode("ascii")
     text = repr(np.asarray(table, dtype=float).tolist())
     return text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n"
