@@ -172,7 +172,7 @@ def render_section(r: dict) -> str:
         "reads back to the same double; the file is byte-identical to the one written row by "
         "row): formatting the doubles is most of its cost. MCAP messages are built a block at "
         "a time from byte images and compressed per chunk (zstd); rerun receives columns "
-        "(`send_columns`) every 1000 ticks.",
+        "(`send_columns`) every 5000 ticks.",
     ]
     if "parts_s" in r:
         parts = r["parts_s"]
