@@ -18,6 +18,11 @@ and a ``rosbag2`` metadata record holding the bag's ``metadata.yaml``; :meth:`Mc
 bag_metadata` gives that document for a bag directory (``vjm run --bag``). rosbags, the ``mcap``
 reader, rerun and Foxglove read every message, in time order.
 
+Blocks. :meth:`McapRecorder.write_block` logs a whole
+:class:`~vjm_ros.sim.simulator.SampleBlock` (``vjm run``), its messages built and indexed in
+bulk (:mod:`vjm_ros.logs.mcap_block`): the file is the one :meth:`McapRecorder.write` of each
+row writes, byte for byte.
+
 Durability. Messages are grouped in small compressed chunks; a chunk is closed and handed to the
 operating system at least every ``chunk_seconds`` of simulated or wall time, so a process killed
 with SIGKILL loses at most that much. Such a truncated file has no summary;
