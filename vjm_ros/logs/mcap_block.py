@@ -63,32 +63,28 @@ class BlockChunkBuilder(ChunkBuilder):
     def add_message(self, message: Message) -> None:
         offset = self.record_writer.count
         message.write(self.record_writer)
-        self._note(np.array([message.channel_id]), np.array([message.log_time]),
-                   np.array([offset]))
+        self._note([(message.channel_id, np.array([message.log_time]), np.array([offset]))])
 
-    def add_records(self, data, channels: np.ndarray, times: np.ndarray,
-                    offsets: np.ndarray) -> None:
-        """Append Message records ``data`` (bytes) holding messages of ``channels`` at ``times``
-        (ns) starting at ``offsets`` (bytes into ``data``, increasing)."""
+    def add_records(self, data, groups: Sequence[tuple]) -> None:
+        """Append Message records ``data`` (bytes); ``groups`` holds ``(channel id, log times
+        (ns), offsets into data (bytes))`` per channel, channels in order of first appearance."""
         base = self.record_writer.count
         self.record_writer.write(data)
-        self._note(channels, times, offsets + base)
+        self._note([(channel, times, offsets + base) for channel, times, offsets in groups])
 
-    def _note(self, channels: np.ndarray, times: np.ndarray, offsets: np.ndarray) -> None:
-        if len(times) == 0:
-            return
-        lo, hi = int(times.min()), int(times.max())
-        self.message_start_time = lo if self.num_messages == 0 else min(
-            self.message_start_time, lo)
-        self.message_end_time = max(self.message_end_time, hi)
-        self.num_messages += len(times)
-        ids, first = np.unique(channels, return_index=True)
-        for channel in ids[np.argsort(first)].tolist():  # in order of first appearance
-            mask = channels == channel
+    def _note(self, groups: Sequence[tuple]) -> None:
+        for channel, times, offsets in groups:
+            if len(times) == 0:
+                continue
+            lo, hi = int(times.min()), int(times.max())
+            self.message_start_time = lo if self.num_messages == 0 else min(
+                self.message_start_time, lo)
+            self.message_end_time = max(self.message_end_time, hi)
+            self.num_messages += len(times)
             index = self.message_indices.get(channel)
             if index is None:
                 index = self.message_indices[channel] = BulkIndex(channel)
-            index.add(times[mask], offsets[mask])
+            index.add(times, offsets)
 
 
 class BlockWriter(Writer):
@@ -104,22 +100,20 @@ class BlockWriter(Writer):
         self._builder = BlockChunkBuilder()
         self._Writer__chunk_builder = self._builder
 
-    def add_records(self, data, channels: np.ndarray, times: np.ndarray,
-                    offsets: np.ndarray) -> None:
+    def add_records(self, data, groups: Sequence[tuple]) -> None:
         """Add Message records to the open chunk (see :meth:`BlockChunkBuilder.add_records`);
         statistics as :meth:`add_message` keeps them; the chunk is closed when over its size."""
-        if len(times) == 0:
-            return
         stats = self._Writer__statistics
-        lo, hi = int(times.min()), int(times.max())
-        stats.message_start_time = lo if stats.message_count == 0 else min(
-            stats.message_start_time, lo)
-        stats.message_end_time = max(stats.message_end_time, hi)
-        ids, counts = np.unique(channels, return_counts=True)
-        for channel, count in zip(ids.tolist(), counts.tolist(), strict=True):
-            stats.channel_message_counts[channel] += count
-        stats.message_count += len(times)
-        self._builder.add_records(data, channels, times, offsets)
+        for channel, times, _ in groups:
+            if len(times) == 0:
+                continue
+            lo, hi = int(times.min()), int(times.max())
+            stats.message_start_time = lo if stats.message_count == 0 else min(
+                stats.message_start_time, lo)
+            stats.message_end_time = max(stats.message_end_time, hi)
+            stats.channel_message_counts[channel] += len(times)
+            stats.message_count += len(times)
+        self._builder.add_records(data, groups)
         self._Writer__maybe_finalize_chunk()
 
 
@@ -226,19 +220,9 @@ class BlockEncoder:
             out.append(_xyz(arrow))
         return out
 
-    def encode(self, block, ns: np.ndarray, first: int) -> tuple:
+    def encode(self, block, ns: np.ndarray, first: int) -> EncodedBlock:
         """Records of the block's rows (``len(ns)``) logged at ``ns`` (ns), the first being
-        sample number ``first`` of the recording.
-
-        Returns
-        -------
-        data : bytes
-            The Message records, tick after tick.
-        channels, times, offsets : ndarray, shape (messages,)
-            Channel id, log time (ns) and byte offset in ``data`` of every message, in order.
-        tick_starts : ndarray of int, shape (rows + 1,)
-            Byte offset in ``data`` where each tick's records start (and the end).
-        """
+        sample number ``first`` of the recording."""
         rows = len(ns)
         seq = (first + np.arange(rows)) & 0xFFFFFFFF
         sec, nsec = np.divmod(ns, NS_PER_S)
@@ -250,8 +234,7 @@ class BlockEncoder:
         ticks = np.arange(rows)
         marked = (np.nonzero((first + ticks) % self.marker_every == 0)[0]
                   if self.marker_every > 0 else ticks[:0])
-        pieces, size = [table], len(self.image)
-        marker_size = 0
+        pieces, size, marker_size = [table], len(self.image), 0
         if len(marked):
             mrows = self._marker_rows(block, marked, seq, ns, sec, nsec)
             marker_size = mrows.shape[1]
@@ -260,21 +243,12 @@ class BlockEncoder:
                 pieces += [table[prev : i + 1], mrows[g]]
                 prev = i + 1
             pieces.append(table[prev:])
-        before = np.searchsorted(marked, ticks, side="left")  # markers before each tick
         tick_starts = np.empty(rows + 1, dtype=np.int64)
-        tick_starts[:-1] = ticks * size + before * marker_size
+        tick_starts[:-1] = ticks * size + np.searchsorted(marked, ticks) * marker_size
         tick_starts[-1] = rows * size + len(marked) * marker_size
-        offsets = [tick_starts[:-1] + int(s) for s in self.starts[:-1]]
-        channels = [np.full(rows, kd.channel) for kd in self.kinds]
-        times = [ns] * len(self.kinds)
-        if len(marked):
-            offsets.append(tick_starts[marked] + size)
-            channels.append(np.full(len(marked), self.marker_channel))
-            times.append(ns[marked])
-        offsets = np.concatenate(offsets)
-        order = np.argsort(offsets, kind="stable")
-        return (b"".join(pieces), np.concatenate(channels)[order], np.concatenate(times)[order],
-                offsets[order], tick_starts)
+        columns = [(kd.channel, int(s)) for kd, s in zip(self.kinds, self.starts, strict=False)]
+        return EncodedBlock(b"".join(pieces), ns, tick_starts, columns, self.marker_channel,
+                            marked, size)
 
     def _marker_rows(self, block, marked, seq, ns, sec, nsec) -> np.ndarray:
         """Records of the markers at ticks ``marked`` (G, record size)."""
@@ -288,3 +262,48 @@ class BlockEncoder:
         values = self._marker_values(block, marked)
         kind.fill(mrows, 0, seq[marked], ns[marked], sec[marked], nsec[marked], values)
         return mrows
+
+
+class EncodedBlock:
+    """The Message records of a block of ticks and where each message lies.
+
+    Parameters
+    ----------
+    data : bytes
+        The records, tick after tick.
+    ns : ndarray of int, shape (rows,)
+        Log time of each tick, ns.
+    tick_starts : ndarray of int, shape (rows + 1,)
+        Byte offset where each tick's records start in ``data`` (and the end).
+    columns : list of (int, int)
+        Channel id and byte offset in its tick of each per-tick record, in order.
+    marker_channel : int or None
+    marked : ndarray of int
+        Ticks that carry a markers record, right after their per-tick records.
+    marker_at : int
+        Byte offset of the markers record in its tick.
+    """
+
+    def __init__(self, data: bytes, ns: np.ndarray, tick_starts: np.ndarray, columns: list,
+                 marker_channel: int | None, marked: np.ndarray, marker_at: int):
+        self.data = memoryview(data)
+        self.ns = ns
+        self.tick_starts = tick_starts
+        self.columns = columns
+        self.marker_channel = marker_channel
+        self.marked = marked
+        self.marker_at = marker_at
+
+    def records(self, start: int, stop: int) -> tuple[memoryview, list[tuple]]:
+        """The records of ticks ``start .. stop - 1`` and their messages as ``(channel id,
+        log times, offsets into the records)`` per channel, in order of first appearance."""
+        lo = int(self.tick_starts[start])
+        starts = self.tick_starts[start:stop] - lo
+        times = self.ns[start:stop]
+        groups = [(channel, times, starts + at) for channel, at in self.columns]
+        first, last = np.searchsorted(self.marked, (start, stop))
+        if last > first:
+            ticks = self.marked[first:last]
+            groups.append((self.marker_channel, self.ns[ticks],
+                           self.tick_starts[ticks] - lo + self.marker_at))
+        return self.data[lo : int(self.tick_starts[stop])], groups

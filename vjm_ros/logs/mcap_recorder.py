@@ -286,16 +286,11 @@ class McapRecorder(Recorder):
         if rows == 0:
             return
         ns = self.timebase.to_ns_array(block.t[:rows])
-        data, channels, times, offsets, tick_starts = self._block_encoder.encode(
-            block, ns, self.samples)
-        view = memoryview(data)
+        encoded = self._block_encoder.encode(block, ns, self.samples)
         start = 0
         while start < rows:
             stop, close = self._chunk_stop(ns, start)
-            lo, hi = int(tick_starts[start]), int(tick_starts[stop])
-            first, last = np.searchsorted(offsets, (lo, hi))
-            self._add_records(view[lo:hi], channels[first:last], times[first:last],
-                              offsets[first:last] - lo)
+            self._add_records(*encoded.records(start, stop))
             if close:
                 self.flush()
             start = stop
@@ -317,14 +312,13 @@ class McapRecorder(Recorder):
             return end + 1, True
         return len(ns), False
 
-    def _add_records(self, data, channels: np.ndarray, times: np.ndarray,
-                     offsets: np.ndarray) -> None:
-        self._writer.add_records(data, channels, times, offsets)
-        lo, hi = int(times.min()), int(times.max())
-        ids, counts = np.unique(channels, return_counts=True)
-        for channel, count in zip(ids.tolist(), counts.tolist(), strict=True):
-            self.bag.note_many(self._records[channel], count, lo, hi)
-        self.message_count += len(times)
+    def _add_records(self, data, groups: list[tuple]) -> None:
+        self._writer.add_records(data, groups)
+        for channel, times, _ in groups:
+            if len(times):
+                self.bag.note_many(self._records[channel], len(times), int(times.min()),
+                                   int(times.max()))
+                self.message_count += len(times)
 
     @atomic
     def note(self, text: str) -> None:
