@@ -1,9 +1,9 @@
-"""The log-cost study: its page section and how the bench keeps it (no speed is asserted)."""
+"""The log-cost study: its runs and its page section (no speed is asserted)."""
 
 from __future__ import annotations
 
 from vjm_ros.app import log_cost
-from vjm_ros.studies.bench.docs import LOG_COST_HEADING, keep_sections, section, with_section
+from vjm_ros.app.log_cost import LOG_COST_HEADING, section, with_section
 
 PAGE = "# Title\n\nintro\n\n## First\n\none\n\n## Last\n\ntwo\n"
 
@@ -15,15 +15,6 @@ def test_section_is_replaced_in_place_or_appended():
     assert replaced == "# Title\n\nintro\n\n## First\n\nnew\n\n## Last\n\ntwo\n"
     assert with_section(PAGE, "## Last", "## Last\n\nnew\n") == PAGE.replace("two", "new")
     assert with_section(PAGE, "## Added", "## Added\n\nx") == PAGE + "\n## Added\n\nx\n"
-
-
-def test_bench_rewrite_keeps_the_log_cost_section():
-    old = with_section(PAGE, LOG_COST_HEADING, f"{LOG_COST_HEADING}\n\nfigures\n")
-    new = "# Title\n\nnew results\n"
-    page = keep_sections(old, new)
-    assert page.startswith(new) and section(page, LOG_COST_HEADING) == (
-        f"{LOG_COST_HEADING}\n\nfigures\n")
-    assert keep_sections(PAGE, new) == new  # nothing to keep
 
 
 def test_measure_runs_every_configuration_and_renders_its_section(tmp_path):

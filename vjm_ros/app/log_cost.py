@@ -124,6 +124,32 @@ def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float
     return out
 
 
+LOG_COST_HEADING = "## Cost of the logs of `vjm run`"
+"""Heading of the section of ``docs/accuracy.md`` written by ``--docs``."""
+
+
+def section(text: str, heading: str) -> str | None:
+    """The section of a Markdown page that starts with the line ``heading``, up to the next
+    ``## `` heading (without it); None when the page has none."""
+    lines = text.splitlines(keepends=True)
+    starts = [i for i, ln in enumerate(lines) if ln.rstrip("\n") == heading]
+    if not starts:
+        return None
+    end = next((i for i in range(starts[0] + 1, len(lines)) if lines[i].startswith("## ")),
+               len(lines))
+    return "".join(lines[starts[0] : end])
+
+
+def with_section(text: str, heading: str, body: str) -> str:
+    """``text`` with its ``heading`` section replaced by ``body`` (appended when absent)."""
+    old = section(text, heading)
+    body = body.rstrip("\n") + "\n"
+    if old is None:
+        return text.rstrip("\n") + "\n\n" + body
+    tail = "\n" if text.index(old) + len(old) < len(text) else ""
+    return text.replace(old, body + tail, 1)
+
+
 TARGET = 1.5
 """Issue target: a run with all three logs costs at most this many physics-only runs."""
 
@@ -135,8 +161,6 @@ def render_section(r: dict) -> str:
     import platform
 
     import numpy as np
-
-    from vjm_ros.studies.bench.docs import LOG_COST_HEADING
 
     when = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()
     ratio, ms = r["ratio"], r["ms_per_sim_s"]
@@ -206,8 +230,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.parts:
         r["parts_s"] = breakdown(args.scene, args.seconds)
     if args.docs is not None:
-        from vjm_ros.studies.bench.docs import LOG_COST_HEADING, with_section
-
         page = args.docs.read_text() if args.docs.is_file() else ""
         args.docs.write_text(with_section(page, LOG_COST_HEADING, render_section(r)))
     if args.json:
