@@ -196,7 +196,8 @@ def render_section(r: dict) -> str:
         "back to the same double), formatted by compiled code (Ryu's shortest digits); the file "
         "is byte-identical to the one written row by row. MCAP messages are built a block of "
         "ticks at a time from byte images of each topic and compressed per chunk (zstd), the "
-        "file byte-identical to the one written message by message; rerun receives columns "
+        "file byte-identical to the one written message by message (clocks aside); rerun "
+        "receives columns "
         "(`send_columns`) every 5000 ticks.",
     ]
     if "parts_s" in r:
