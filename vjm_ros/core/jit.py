@@ -91,7 +91,7 @@ REFCOUNT_FREE = HAVE_NUMBA and _refcount_free_supported()
 """Whether functions that create no arrays are compiled without numba's reference counting."""
 
 
-def jit(fn=None, *, allocates: bool = True):
+def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged.
 
     ``allocates=False`` declares that ``fn`` (and everything it calls) creates no arrays, only
@@ -102,12 +102,17 @@ def jit(fn=None, *, allocates: bool = True):
     (rk4, exact closure: 4.3 -> 2.9 us, the same numbers). numba refuses to compile such a
     function if it does create an array, so the declaration cannot silently be wrong. Usable
     as ``@jit`` or ``@jit(allocates=False)``.
+
+    ``inline="always"``: numba inlines the function's body into each compiled caller instead of
+    compiling it as a function of its own; for a function with one compiled caller, that saves
+    compiling (and optimizing and emitting machine code for) a second copy of everything it
+    calls.
     """
     if fn is None:
-        return functools.partial(jit, allocates=allocates)
+        return functools.partial(jit, allocates=allocates, inline=inline)
     if not HAVE_NUMBA:
         return fn
-    options = {"cache": True, "nogil": True, "error_model": "numpy"}
+    options = {"cache": True, "nogil": True, "error_model": "numpy", "inline": inline}
     if not allocates and REFCOUNT_FREE:
         options["_nrt"] = False
     return _njit(**options)(fn)

@@ -64,7 +64,7 @@ BEYOND_LIMIT = 3
 """A closure residual after the failing tick exceeds the divergence limit."""
 
 
-@_jit(allocates=False)
+@_jit(allocates=False, inline="always")
 def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
