@@ -98,7 +98,8 @@ def warm_imports(scene: str) -> dict[str, float]:
 def stages(scene: str) -> dict[str, float]:
     """Wall time of each stage of a start in this process, in order, s.
 
-    Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator),
+    Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator,
+    :mod:`vjm_ros.app.cli` itself aside: the studies do not import the app layer),
     ``numba`` (the numba package, where the stages before did not import it), ``registries``
     (numba's typing and lowering registries, loaded before the first compiled function is loaded
     or compiled), ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
@@ -117,7 +118,10 @@ def stages(scene: str) -> dict[str, float]:
         return now
 
     t = time.perf_counter()
-    import vjm_ros.app.cli  # noqa: F401
+    import numpy  # noqa: F401
+
+    import vjm_ros.logs.signals  # noqa: F401
+    import vjm_ros.logs.storage  # noqa: F401
     from vjm_ros.scene.loader import load_scene
     from vjm_ros.sim.settings import resolve_settings
     from vjm_ros.sim.simulator import SampleBlock, Simulator
