@@ -37,3 +37,27 @@ def test_start_time_measures_warm_and_cold_runs_with_their_stages():
         assert list(row[key]) == STAGES, key
         assert all(math.isfinite(v) and v >= 0 for v in row[key].values()), row[key]
     assert row["warm_imports_s"] and all(v > 0 for v in row["warm_imports_s"].values())
+
+
+def test_the_section_replaces_its_old_self(tmp_path):
+    page = tmp_path / "accuracy.md"
+    page.write_text("# Accuracy and speed\n\n## Findings\n\nx\n")
+    start_time.write_section(page, "## Start time\n\nfirst\n")
+    assert page.read_text() == "# Accuracy and speed\n\n## Findings\n\nx\n\n## Start time\n\nfirst\n"
+    page.write_text(page.read_text() + "\n## Later\n\ny\n")
+    start_time.write_section(page, "## Start time\n\nsecond\n")
+    assert page.read_text() == ("# Accuracy and speed\n\n## Findings\n\nx\n\n## Start time\n\n"
+                                "second\n\n## Later\n\ny\n")
+
+
+def test_the_section_shows_the_measured_figures():
+    row = {"scene": "four_bar", "floor_s": 0.02, "warm_s": 0.456, "cold_s": 7.891,
+           "warm_runs_s": [0.456] * 3, "cold_runs_s": [7.891],
+           "warm_stages_s": dict.fromkeys(STAGES, 0.01),
+           "cold_stages_s": dict.fromkeys(STAGES, 0.02), "warm_imports_s": {"numba": 0.2},
+           "load_1min": 1.0}
+    text = start_time.render_section(row, "2026-01-01T00:00:00+00:00")
+    assert text.startswith(start_time.HEADING + "\n")
+    assert "| warm | 0.46 | 0.5 |" in text and "| cold | 7.89 | 3 |" in text
+    assert "| stage | " + " | ".join(STAGES) + " |" in text
+    assert "numba 0.200" in text

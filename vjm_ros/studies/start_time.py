@@ -1,7 +1,7 @@
 """Start time of ``vjm run``, warm (numba's cache filled) and cold (empty cache), with a breakdown.
 
-``python -m vjm_ros.studies.start_time [--scene four_bar] [--repeats 5] [--json]`` measures in
-one run:
+``python -m vjm_ros.studies.start_time [--scene four_bar] [--repeats 5] [--json]
+[--docs docs/accuracy.md]`` measures in one run:
 
 1. **floor**: ``python -c pass``, the interpreter alone (median of ``repeats`` processes);
 2. **warm**: the whole process ``vjm run SCENE --duration 0.001`` (one control tick, outputs to a
@@ -13,7 +13,9 @@ one run:
    cache or compiled, the first tick), and from ``python -X importtime`` the import time of each
    top-level package (self times summed; ``-X importtime`` itself slows imports a little).
 
-Issue targets: warm at most 0.5 s, cold at most 3 s. Times on a shared 2-core machine vary 2-4x
+With ``--docs`` it writes the figures as the page's start-time section (:data:`HEADING`; the bench
+keeps that section when it rewrites the page). Issue targets: warm at most 0.5 s, cold at most
+3 s. Times on a shared 2-core machine vary 2-4x
 with load (the 1-minute load average is printed with them): compare figures of one run.
 """
 
@@ -30,6 +32,9 @@ import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
+
+HEADING = "## Start time"
+"""Heading of the section of ``docs/accuracy.md`` this study writes."""
 
 TIMEOUT = 600.0
 """Hang guard for each measured process, s (a cold start takes seconds)."""
@@ -200,6 +205,55 @@ def _stage_line(times: dict[str, float]) -> str:
     return ", ".join(f"{k} {v:.2f}" for k, v in times.items())
 
 
+def render_section(row: dict, when: str) -> str:
+    """The start-time section of ``docs/accuracy.md`` from :func:`measure`'s figures."""
+    warm, cold = row["warm_stages_s"], row["cold_stages_s"]
+    lines = [
+        HEADING,
+        "",
+        f"Written by `python -m vjm_ros.studies.start_time --docs docs/accuracy.md` ({when}; "
+        f"1-minute load average {row['load_1min']:.1f} on this shared machine: the figures vary "
+        "2-4x with load, compare those of one run). Whole process of "
+        f"`vjm run {row['scene']} --duration 0.001` (one control tick), median of "
+        f"{len(row['warm_runs_s'])} runs warm (numba's cache filled) and of "
+        f"{len(row['cold_runs_s'])} cold (an empty `NUMBA_CACHE_DIR`: every compiled entry point "
+        f"compiled before the first tick); `python -c pass` takes {row['floor_s']:.2f} s.",
+        "",
+        "| start | whole process s | target s |",
+        "|---|---|---|",
+        f"| warm | {row['warm_s']:.2f} | 0.5 |",
+        f"| cold | {row['cold_s']:.2f} | 3 |",
+        "",
+        "Stages in a fresh process (s; `kernel`: `kernels.step`, `pipeline`: "
+        "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; `registries`: "
+        "numba's own typing and lowering tables, loaded before the first compiled function):",
+        "",
+        "| stage | " + " | ".join(warm) + " |",
+        "|---|" + "---|" * len(warm),
+        "| warm | " + " | ".join(f"{v:.2f}" for v in warm.values()) + " |",
+        "| cold | " + " | ".join(f"{cold.get(k, float('nan')):.2f}" for k in warm) + " |",
+        "",
+        "Import time of a warm run per top-level package (`-X importtime`, self times summed, s): "
+        + ", ".join(f"{k} {v:.3f}" for k, v in row["warm_imports_s"].items()) + ".",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def write_section(path: Path, section: str) -> None:
+    """Put ``section`` in the page at ``path`` in place of its start-time section, or at its end."""
+    text = path.read_text() if path.exists() else ""
+    lines = text.splitlines(keepends=True)
+    heads = [i for i, line in enumerate(lines) if line.rstrip("\n") == HEADING]
+    if not heads:
+        path.write_text(text.rstrip("\n") + ("\n\n" if text else "") + section)
+        return
+    start = heads[0]
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    tail = "".join(lines[end:])
+    path.write_text("".join(lines[:start]) + section + ("\n" + tail if tail else ""))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.start_time",
                                      description=__doc__.split("\n")[0])
@@ -207,6 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="warm runs (median)")
     parser.add_argument("--cold-repeats", type=int, default=1, help="cold runs (median)")
     parser.add_argument("--json", action="store_true", help="figures as JSON on the last line")
+    parser.add_argument("--docs", type=Path, metavar="PAGE",
+                        help="write the figures as the page's start-time section")
     parser.add_argument("--stages", metavar="SCENE", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.stages:
@@ -222,6 +278,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  warm stages, s: {_stage_line(row['warm_stages_s'])}")
     print(f"  cold stages, s: {_stage_line(row['cold_stages_s'])}")
     print(f"  warm imports (-X importtime, self, s): {_stage_line(row['warm_imports_s'])}")
+    if args.docs is not None:
+        when = time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime())
+        write_section(args.docs, render_section(row, when))
     if args.json:
         print(json.dumps(row))
     return 0
