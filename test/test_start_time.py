@@ -31,7 +31,7 @@ def test_import_times_sum_self_times_per_top_level_package():
 def test_start_time_measures_warm_and_cold_runs_with_their_stages():
     row = start_time.measure("four_bar", repeats=1, cold_repeats=1)
     assert len(row["warm_runs_s"]) == 1 and len(row["cold_runs_s"]) == 1
-    for key in ("floor_s", "warm_s", "cold_s"):
+    for key in ("floor_s", "warm_s", "cold_s", "warm_cpu_s", "cold_cpu_s"):
         assert math.isfinite(row[key]) and row[key] > 0, key
     for key in ("warm_stages_s", "cold_stages_s"):
         assert list(row[key]) == STAGES, key
@@ -52,12 +52,13 @@ def test_the_section_replaces_its_old_self(tmp_path):
 
 def test_the_section_shows_the_measured_figures():
     row = {"scene": "four_bar", "floor_s": 0.02, "warm_s": 0.456, "cold_s": 7.891,
+           "warm_cpu_s": 0.4, "cold_cpu_s": 7.0,
            "warm_runs_s": [0.456] * 3, "cold_runs_s": [7.891],
            "warm_stages_s": dict.fromkeys(STAGES, 0.01),
            "cold_stages_s": dict.fromkeys(STAGES, 0.02), "warm_imports_s": {"numba": 0.2},
            "load_1min": 1.0}
     text = start_time.render_section(row, "2026-01-01T00:00:00+00:00")
     assert text.startswith(start_time.HEADING + "\n")
-    assert "| warm | 0.46 | 0.5 |" in text and "| cold | 7.89 | 3 |" in text
+    assert "| warm | 0.46 | 0.40 | 0.5 |" in text and "| cold | 7.89 | 7.00 | 3 |" in text
     assert "| stage | " + " | ".join(STAGES) + " |" in text
     assert "numba 0.200" in text
