@@ -8,7 +8,9 @@
    temporary directory) with numba's cache filled by a run before, median of ``repeats``;
 3. **cold**: the same process with ``NUMBA_CACHE_DIR`` set to a new, empty temporary directory:
    every compiled entry point is compiled before the first tick (median of ``cold_repeats``);
-4. **breakdown**, warm and cold: in a fresh process, the wall time of each start stage
+4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
+   tick (``duration:=0.001``), rclpy start and shutdown included, median of ``repeats``;
+5. **breakdown**, warm and cold: in a fresh process, the wall time of each start stage
    (:func:`stages`: imports, numba's own registries, each compiled entry point loaded from the
    cache or compiled, the first tick), and from ``python -X importtime`` the import time of each
    top-level package (self times summed; ``-X importtime`` itself slows imports a little).
@@ -50,9 +52,17 @@ def run_command(scene: str, out: str) -> list[str]:
     return [*head, "run", scene, "--duration", "0.001", "--out", out]
 
 
+def node_command(scene: str) -> list[str]:
+    """Command line of one measured node: one tick of ``scene`` in fast mode."""
+    cmd = [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args"]
+    for param in (f"scene:={scene}", "duration:=0.001", "realtime:=false", "command_timeout:=0.0"):
+        cmd += ["-p", param]
+    return cmd
+
+
 def _env(cache: str | None) -> dict[str, str]:
     """The environment of a measured process: numba's cache in ``cache`` (None: the default)."""
-    env = dict(os.environ)
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     env.pop("NUMBA_CACHE_DIR", None)
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = cache
@@ -232,6 +242,8 @@ def render_section(row: dict, when: str) -> str:
         "|---|---|---|---|",
         f"| warm | {row['warm_s']:.2f} | {row['warm_cpu_s']:.2f} | 0.5 |",
         f"| cold | {row['cold_s']:.2f} | {row['cold_cpu_s']:.2f} | 3 |",
+        *([f"| node warm (`vjm_sim_node`, one tick, rclpy included) | {row['node_warm_s']:.2f} | "
+           f"{row['node_warm_cpu_s']:.2f} | – |"] if "node_warm_s" in row else []),
         "",
         "Stages in a fresh process (s; `kernel`: `kernels.step`, `pipeline`: "
         "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; `registries`: "
@@ -270,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="warm runs (median)")
     parser.add_argument("--cold-repeats", type=int, default=1, help="cold runs (median)")
     parser.add_argument("--json", action="store_true", help="figures as JSON on the last line")
+    parser.add_argument("--node", action="store_true",
+                        help="also the node's warm start to its first tick (needs ROS 2)")
     parser.add_argument("--docs", type=Path, metavar="PAGE",
                         help="write the figures as the page's start-time section")
     parser.add_argument("--stages", metavar="SCENE", help=argparse.SUPPRESS)
@@ -280,12 +294,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.repeats < 1 or args.cold_repeats < 1:
         parser.error("--repeats and --cold-repeats: expected at least 1")
     row = measure(args.scene, args.repeats, args.cold_repeats)
+    if args.node:
+        wall_time(node_command(args.scene), _env(None))  # not timed: loads what the node loads
+        node = [wall_time(node_command(args.scene), _env(None)) for _ in range(args.repeats)]
+        row["node_warm_s"] = statistics.median(w for w, _ in node)
+        row["node_warm_cpu_s"] = statistics.median(c for _, c in node)
     print(f"vjm run {args.scene} --duration 0.001, whole process (python -c pass: "
           f"{row['floor_s']:.2f} s), load {row['load_1min']:.2f}")
     print(f"  warm {row['warm_s']:.2f} s, CPU {row['warm_cpu_s']:.2f} s (median of "
           f"{args.repeats}; target <= 0.5 s)")
     print(f"  cold {row['cold_s']:.2f} s, CPU {row['cold_cpu_s']:.2f} s (empty numba cache, median "
           f"of {args.cold_repeats}; target <= 3 s)")
+    if args.node:
+        print(f"  node warm {row['node_warm_s']:.2f} s, CPU {row['node_warm_cpu_s']:.2f} s "
+              f"(vjm_sim_node, one tick in fast mode, rclpy included)")
     print(f"  warm stages, s: {_stage_line(row['warm_stages_s'])}")
     print(f"  cold stages, s: {_stage_line(row['cold_stages_s'])}")
     print(f"  warm imports (-X importtime, self, s): {_stage_line(row['warm_imports_s'])}")
