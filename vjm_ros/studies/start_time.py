@@ -148,10 +148,13 @@ def stages(scene: str) -> dict[str, float]:
     from vjm_ros.sim.trajectory import Trajectory
 
     t = lap("import", t)
-    from numba.core.registry import cpu_target
-
+    try:
+        from numba.core.registry import cpu_target
+    except ImportError:  # no numba: the kernels run as plain Python, nothing to load
+        cpu_target = None
     t = lap("numba", t)
-    cpu_target.target_context.refresh()
+    if cpu_target is not None:
+        cpu_target.target_context.refresh()
     t = lap("registries", t)
     sc = load_scene(scene)
     settings = resolve_settings(sc.defaults, sc.gains)
