@@ -8,6 +8,8 @@ well-posed system in double precision (condition numbers here below 1e4).
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -125,3 +127,42 @@ def test_compiled_functions_are_keyed_on_every_compiled_source():
     if jit.LOCATORS_INSTALLED:
         locator = kernels.step._cache._impl.locator
         assert locator.get_source_stamp() == jit.sources_stamp()
+
+
+def test_numba_starts_without_importing_scipy_linalg():
+    """numba's BLAS check finds scipy.linalg.cython_blas loaded alone (core/jit.py), so a start
+    does not import all of scipy.linalg; numba's BLAS and scipy.linalg still work after it."""
+    code = "\n".join([
+        "import sys",
+        "import numpy as np",
+        "from vjm_ros.core import jit",
+        "from numba import njit",
+        "from numba.core.registry import cpu_target",
+        "cpu_target.target_context.refresh()",  # what numba does before its first load
+        "print('scipy.linalg' in sys.modules, 'scipy.linalg.cython_blas' in sys.modules)",
+        "print(njit(lambda a, b: np.dot(a, b))(np.eye(2) * 2.0, np.ones(2)).tolist())",
+        "import scipy.linalg",
+        "print(scipy.linalg.solve(np.eye(2) * 4.0, np.ones(2)).tolist())",
+    ])
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)  # a hang guard: the check takes ~2 s
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[:3] == ["False True", "[2.0, 2.0]", "[0.25, 0.25]"]
+
+
+def test_compiled_callers_pass_no_literal_arguments_to_the_kernel():
+    """A literal argument (``8``, ``-1``) of kernels.step in a compiled caller makes numba compile
+    a whole further copy of the kernel for that signature; the block pipeline passes names
+    (``K.NO_ROW``), so every signature of step is of plain types."""
+    from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.settings import SimulationSettings
+    from vjm_ros.sim.simulator import SampleBlock, Simulator
+
+    sc = load_scene("four_bar")
+    sim = Simulator(sc.model, SimulationSettings(integrator="rk4", closure="exact",
+                                                 projection=True), sc.gains)
+    assert sim.blocks_compiled()
+    sim.advance_block(SampleBlock(sc.model, 2), 2)  # projection and observation included
+    assert kernels.step.signatures
+    literal = [s for s in kernels.step.signatures if any("Literal" in str(t) for t in s)]
+    assert not literal, literal

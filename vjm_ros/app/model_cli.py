@@ -18,10 +18,7 @@ import json
 
 import numpy as np
 
-from vjm_ros.control import ClosedChainModel
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.scene.description import with_initial_positions
-from vjm_ros.scene.loader import load_scene
 
 
 def add_parser(sub) -> None:
@@ -58,6 +55,11 @@ def _pairs(items: list[str], flag: str) -> dict[str, float]:
 
 def run(args) -> int:
     """The command: returns the exit code."""
+    # imported here: every vjm command registers this parser, only `vjm model` needs these
+    from vjm_ros.control import ClosedChainModel
+    from vjm_ros.scene.description import with_initial_positions
+    from vjm_ros.scene.loader import load_scene
+
     scene = load_scene(args.scene)
     model = with_initial_positions(scene.model, _pairs(args.state, "--state"), name="--state")
     cm = ClosedChainModel(model, args.independent)

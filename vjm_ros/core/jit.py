@@ -11,12 +11,46 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.machinery
+import importlib.util
+import sys
 from pathlib import Path
+
+
+def _load_blas_wrappers() -> bool:
+    """Load ``scipy.linalg.cython_blas`` alone, without the rest of ``scipy.linalg``.
+
+    numba checks that BLAS is there before it loads or compiles its first function, by importing
+    ``scipy.linalg.cython_blas``; the import of its package ``scipy.linalg`` takes 0.1-0.2 s
+    (``scipy._lib`` imports ``numpy.f2py`` and ``numpy.testing``), a quarter of a warm
+    ``vjm run``, for a module none of the kernels uses. Loaded from its file first, the module
+    is the same (numba finds it in ``sys.modules``), and ``import scipy.linalg`` later still
+    loads the rest. Does nothing, and returns False, where ``scipy.linalg`` is imported already
+    or the module is not found as a file of the installed scipy (numba then imports it itself).
+    """
+    name = "scipy.linalg.cython_blas"
+    if "scipy.linalg" in sys.modules or name in sys.modules:
+        return False
+    try:
+        scipy_spec = importlib.util.find_spec("scipy")
+        folder = Path(next(iter(scipy_spec.submodule_search_locations))) / "linalg"
+        path = next(folder / f"cython_blas{s}" for s in importlib.machinery.EXTENSION_SUFFIXES
+                    if (folder / f"cython_blas{s}").is_file())
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    except Exception:  # noqa: BLE001 - any other layout: numba imports the module itself
+        sys.modules.pop(name, None)
+        return False
+    return True
+
 
 try:  # numba is optional: without it the kernels run as plain Python
     from numba import njit as _njit
 
     HAVE_NUMBA = True
+    _load_blas_wrappers()
 except ImportError:  # pragma: no cover - exercised only where numba is missing
     HAVE_NUMBA = False
 
@@ -91,7 +125,7 @@ REFCOUNT_FREE = HAVE_NUMBA and _refcount_free_supported()
 """Whether functions that create no arrays are compiled without numba's reference counting."""
 
 
-def jit(fn=None, *, allocates: bool = True):
+def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged.
 
     ``allocates=False`` declares that ``fn`` (and everything it calls) creates no arrays, only
@@ -102,12 +136,17 @@ def jit(fn=None, *, allocates: bool = True):
     (rk4, exact closure: 4.3 -> 2.9 us, the same numbers). numba refuses to compile such a
     function if it does create an array, so the declaration cannot silently be wrong. Usable
     as ``@jit`` or ``@jit(allocates=False)``.
+
+    ``inline="always"``: numba inlines the function's body into each compiled caller instead of
+    compiling it as a function of its own; for a function with one compiled caller, that saves
+    compiling (and optimizing and emitting machine code for) a second copy of everything it
+    calls.
     """
     if fn is None:
-        return functools.partial(jit, allocates=allocates)
+        return functools.partial(jit, allocates=allocates, inline=inline)
     if not HAVE_NUMBA:
         return fn
-    options = {"cache": True, "nogil": True, "error_model": "numpy"}
+    options = {"cache": True, "nogil": True, "error_model": "numpy", "inline": inline}
     if not allocates and REFCOUNT_FREE:
         options["_nrt"] = False
     return _njit(**options)(fn)

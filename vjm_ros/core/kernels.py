@@ -341,6 +341,17 @@ def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, 
 # ---------------------------------------------------------------------------------- entry point
 NO_KNOWN = np.empty((0, 0))
 """``known`` argument of :func:`step` when no acceleration is known."""
+NO_ROW = -1
+"""``row`` argument of :func:`step` when no acceleration is known."""
+ONE_STEP = 1
+"""``steps`` argument of :func:`step` for one evaluation."""
+PROJECTION_STEPS = 8
+"""``steps`` argument of :func:`step` for a projection after a tick: Gauss-Newton steps at most.
+
+Compiled callers pass the integer arguments of :func:`step` as attributes of this module
+(``K.NO_ROW``), typed ``int64``, never as literals or as globals of their own module: numba types
+those as ``Literal[int](-1)`` and compiles a whole extra copy of :func:`step` for each such
+signature (seconds each on a cold cache)."""
 
 
 def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
@@ -388,7 +399,7 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     """
     return step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 kin, mm, bias, cm, crow, jac, points, out_a, out_b,
-                workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, -1)
+                workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, NO_ROW)
 
 
 def workspace(n: int, r: int, blocks: np.ndarray | None = None) -> tuple[np.ndarray, ...]:

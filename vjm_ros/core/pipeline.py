@@ -64,7 +64,7 @@ BEYOND_LIMIT = 3
 """A closure residual after the failing tick exceeds the divergence limit."""
 
 
-@_jit(allocates=False)
+@_jit(allocates=False, inline="always")
 def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
@@ -98,8 +98,9 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
-    status = K.step(K.EVALUATE, q, qd, tau, 0.0, 1, 0.0, lint, lflt, cint, cflt, gains, par,
-                    kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work, o_qdd, -1)
+    status = K.step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt, gains,
+                    par, kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work, o_qdd,
+                    K.NO_ROW)
     power = 0.0
     for j in range(n):
         o_q[row, j] = q[j]
@@ -203,14 +204,15 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     o_error = out[6]
     for t in range(ticks):
         # From the second tick on, the first RK4 stage is the state observed at the last tick.
-        known = t - 1 if method == K.RK4 else -1
+        known = t - 1 if method == K.RK4 else K.NO_ROW
         status = K.step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
                         par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
             return t, SINGULAR
         if project:
-            status = K.step(K.PROJECT, qa, qb, zero, 0.0, 8, 1e-12, lint, lflt, cint, cflt,
-                            gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd, work, o_qdd, -1)
+            status = K.step(K.PROJECT, qa, qb, zero, 0.0, K.PROJECTION_STEPS, 1e-12, lint, lflt,
+                            cint, cflt, gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd,
+                            work, o_qdd, K.NO_ROW)
             if status != 0:
                 return t, SINGULAR
         else:
