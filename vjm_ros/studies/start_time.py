@@ -4,8 +4,8 @@
 [--docs docs/accuracy.md]`` measures in one run:
 
 1. **floor**: ``python -c pass``, the interpreter alone (median of ``repeats`` processes);
-2. **warm**: the whole process ``vjm run SCENE --duration 0.001`` (one control tick, outputs to a
-   temporary directory) with numba's cache filled by a run before, median of ``repeats``;
+2. **warm**: the whole process ``vjm run SCENE --duration 0.001`` (one control tick, the summary
+   printed, no files written) with numba's cache filled by a run before, median of ``repeats``;
 3. **cold**: the same process with ``NUMBA_CACHE_DIR`` set to a new, empty temporary directory:
    every compiled entry point is compiled before the first tick (median of ``cold_repeats``);
 4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
@@ -45,11 +45,11 @@ TIMEOUT = 600.0
 _IMPORT_LINE = re.compile(r"^import time:\s+(\d+) \|\s+(\d+) \| (\s*)(\S+)")
 
 
-def run_command(scene: str, out: str) -> list[str]:
-    """Command line of one measured ``vjm run``: one tick of ``scene``, outputs in ``out``."""
+def run_command(scene: str) -> list[str]:
+    """Command line of one measured ``vjm run``: one tick of ``scene``."""
     script = Path(sys.executable).with_name("vjm")
     head = [str(script)] if script.exists() else [sys.executable, "-m", "vjm_ros.app.cli"]
-    return [*head, "run", scene, "--duration", "0.001", "--out", out]
+    return [*head, "run", scene, "--duration", "0.001"]
 
 
 def node_command(scene: str) -> list[str]:
@@ -106,12 +106,11 @@ def import_times(stderr: str) -> dict[str, float]:
 
 def warm_imports(scene: str) -> dict[str, float]:
     """Import time per top-level package of a warm ``vjm run`` of one tick, s."""
-    with tempfile.TemporaryDirectory() as out:
-        cmd = run_command(scene, out)
-        if cmd[0] != sys.executable:
-            cmd = [sys.executable, "-m", "vjm_ros.app.cli", *cmd[1:]]
-        done = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], env=_env(None),
-                              capture_output=True, text=True, timeout=TIMEOUT)
+    cmd = run_command(scene)
+    if cmd[0] != sys.executable:
+        cmd = [sys.executable, "-m", "vjm_ros.app.cli", *cmd[1:]]
+    done = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], env=_env(None),
+                          capture_output=True, text=True, timeout=TIMEOUT)
     return import_times(done.stderr)
 
 
@@ -195,15 +194,14 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
         (:func:`stages`), ``warm_imports_s`` (:func:`import_times`, the ten largest),
         ``load_1min``.
     """
-    with tempfile.TemporaryDirectory() as out:
-        cmd = run_command(scene, out)
-        wall_time(cmd, _env(None))  # fills numba's cache if it is empty
-        floor = [wall_time([sys.executable, "-c", "pass"], _env(None)) for _ in range(repeats)]
-        warm = [wall_time(cmd, _env(None)) for _ in range(repeats)]
-        cold = []
-        for _ in range(cold_repeats):
-            with tempfile.TemporaryDirectory() as cache:
-                cold.append(wall_time(cmd, _env(cache)))
+    cmd = run_command(scene)
+    wall_time(cmd, _env(None))  # fills numba's cache if it is empty
+    floor = [wall_time([sys.executable, "-c", "pass"], _env(None)) for _ in range(repeats)]
+    warm = [wall_time(cmd, _env(None)) for _ in range(repeats)]
+    cold = []
+    for _ in range(cold_repeats):
+        with tempfile.TemporaryDirectory() as cache:
+            cold.append(wall_time(cmd, _env(cache)))
     with tempfile.TemporaryDirectory() as cache:
         cold_stages = stages_in_process(scene, cache)
     imports = warm_imports(scene)
