@@ -28,6 +28,7 @@ def test_import_times_sum_self_times_per_top_level_package():
     assert times["vjm_ros"] == pytest.approx(7e-6, rel=1e-12)
 
 
+@pytest.mark.slow  # two compiles from an empty numba cache: 25-50 s on this machine
 def test_start_time_measures_warm_and_cold_runs_with_their_stages():
     row = start_time.measure("four_bar", repeats=1, cold_repeats=1)
     assert len(row["warm_runs_s"]) == 1 and len(row["cold_runs_s"]) == 1
