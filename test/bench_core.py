@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import HAVE_NUMBA, FastMechanism, fuse_integrator
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import DivergenceError
 from vjm_ros.core.integrators import make_integrator
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracle.mechanism import Mechanism
 
 from vjm_ros.control import ClosedChainModel, InfeasibleEffortsError, SingularConfigurationError
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.core.mechanism import Mechanism
 
 SCENES = ["five_bar", "three_chain", "four_bar", "six_bar"]
 
@@ -233,7 +233,7 @@ def test_reduced_dynamics_balance_the_power_of_the_energies(name):
     """Oracle: d(T + V)/dt along a motion equals ud . (M_r udd + c_r + g_r), the power the
     actuators deliver (B tau . qd = (S^T B tau) . ud). T and V come from the energy functions
     of the open chains (mass-centre velocities and heights), differentiated numerically."""
-    from vjm_ros.core.dynamics import kinetic_energy, potential_energy
+    from oracle.dynamics import kinetic_energy, potential_energy
 
     m = ClosedChainModel.from_scene(name)
     q, qd, ud = state(m)

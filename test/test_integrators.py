@@ -10,10 +10,10 @@ from __future__ import annotations
 import chains as ch
 import numpy as np
 import pytest
+from oracle.mechanism import Mechanism
 
 from vjm_ros.core.constraints import PenaltyClosure
 from vjm_ros.core.integrators import FIXED_STEP, INTEGRATORS, make_integrator
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
