@@ -390,7 +390,8 @@ def test_fuse_integrator_choices():
 def test_make_mechanism():
     model = load_scene("four_bar").model
     method = _method("exact", model.n_rows)
-    assert not isinstance(make_mechanism(model, method, "numpy"), FastMechanism)
+    with pytest.raises(ValueError, match="'numpy' is no longer a choice.*use 'auto' or 'numba'"):
+        make_mechanism(model, method, "numpy")
     assert isinstance(make_mechanism(model, method, "numba"), FastMechanism)
     assert isinstance(make_mechanism(model, method), FastMechanism)
     with pytest.raises(ValueError, match="kernel"):

@@ -53,8 +53,9 @@ from vjm_ros.core.mechanism import Evaluation, Mechanism
 from vjm_ros.core.model import Model
 from vjm_ros.core.packing import chain_blocks, pack_method, pack_model
 
-KERNELS = ("auto", "numba", "numpy")
-"""Accepted values of the ``kernel`` choice: compiled when available, compiled, numpy reference."""
+KERNELS = ("auto", "numba")
+"""Accepted values of the ``kernel`` choice: the compiled kernels (machine code with numba, plain
+Python without), or the same with numba required."""
 
 HAVE_NUMBA = K.HAVE_NUMBA
 """True when numba is importable (the compiled kernels are then machine code)."""
@@ -515,23 +516,25 @@ def make_mechanism(
     model : Model
     method : PenaltyClosure or ExactClosure
     kernel : str
-        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
-        error without numba) or ``"numpy"`` (the reference :class:`~vjm_ros.core.mechanism.Mechanism`).
+        ``"auto"`` (the compiled kernels; plain Python where numba is missing) or ``"numba"``
+        (an error without numba).
 
     Returns
     -------
-    Mechanism
-        A :class:`FastMechanism` or a :class:`~vjm_ros.core.mechanism.Mechanism`.
+    FastMechanism
 
     Raises
     ------
     ValueError
-        For an unknown ``kernel``, or ``"numba"`` without numba installed.
+        For an unknown ``kernel`` (the former ``"numpy"`` included), or ``"numba"`` without
+        numba installed.
     """
+    if kernel == "numpy":
+        raise ValueError("kernel: 'numpy' is no longer a choice (the physics runs only in the "
+                         "compiled kernels, as plain Python where numba is missing); use 'auto' "
+                         "or 'numba'")
     if kernel not in KERNELS:
         raise ValueError(f"kernel: expected one of {', '.join(KERNELS)}, found {kernel!r}")
     if kernel == "numba" and not HAVE_NUMBA:
         raise ValueError("kernel: 'numba' needs the numba package (pip install 'numba>=0.64')")
-    if kernel == "numpy" or (kernel == "auto" and not HAVE_NUMBA):
-        return Mechanism(model, method)
     return FastMechanism(model, method)

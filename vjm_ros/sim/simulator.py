@@ -16,7 +16,6 @@ from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
@@ -163,16 +162,13 @@ class Simulator:
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = closure_method(model, self.settings, self.scene_gains,
                                      self._initial_mobility)
-        if self.settings.kernel == "numpy":
-            self.mechanism = Mechanism(model, self.method)
-        else:
-            from vjm_ros.core.compiled import (  # numba is imported only here
-                fuse_integrator,
-                make_mechanism,
-            )
+        from vjm_ros.core.compiled import (  # numba is imported only here
+            fuse_integrator,
+            make_mechanism,
+        )
 
-            self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
-            self.integrator = fuse_integrator(self.integrator, self.mechanism)
+        self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
+        self.integrator = fuse_integrator(self.integrator, self.mechanism)
         self.stiffness_report, radius = [], None
         if isinstance(self.method, PenaltyClosure) and model.n_rows:
             self.stiffness_report, radius = closure_modes(
@@ -502,7 +498,7 @@ class Simulator:
             "substeps": s.substeps,
             "dt": self.dt,
             "h": self.h,
-            "kernel": getattr(self.mechanism, "kernel", "numpy"),
+            "kernel": self.mechanism.kernel,
         }
         if isinstance(self.method, PenaltyClosure):
             out["kp"] = self.method.kp.tolist()
