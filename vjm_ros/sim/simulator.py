@@ -15,7 +15,7 @@ from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
-from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
+from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.model import Model
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
@@ -355,13 +355,7 @@ class Simulator:
                 self.t, "the state is no longer finite", self._worst_closure(), self._likely_cause()
             )
         if self.model.n_rows and self.divergence_limit:
-            if hasattr(self.mechanism, "closure_errors"):
-                err = self.mechanism.closure_errors(self.q)
-            else:
-                terms = self.mechanism.closures.evaluate(
-                    forward_kinematics(self.model, self.q), jacobian=False
-                )
-                err = self.mechanism.closures.errors(terms)
+            err = self.mechanism.closure_errors(self.q)
             worst = int(np.argmax(err))
             if err[worst] > self.divergence_limit:
                 raise DivergenceError(
@@ -376,8 +370,7 @@ class Simulator:
         if not self.model.n_rows or not self._history:
             return None
         _, q, _ = self._history[-1]
-        terms = self.mechanism.closures.evaluate(forward_kinematics(self.model, q), jacobian=False)
-        return self.model.closures[int(np.argmax(self.mechanism.closures.errors(terms)))].name
+        return self.model.closures[int(np.argmax(self.mechanism.closure_errors(q)))].name
 
     def _likely_cause(self) -> str:
         """Name the likely cause of a divergence, judged at the last good state."""
@@ -432,11 +425,7 @@ class Simulator:
         """Singular values of the closure Jacobian at ``q``, largest first (empty if none)."""
         if not self.model.n_rows or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             return np.zeros(0)
-        try:  # one kernel call where the kernel is compiled
-            jacobian = self.mechanism.closure_jacobian(q)
-        except np.linalg.LinAlgError:  # a singular mass matrix: the Jacobian from kinematics
-            jacobian = self.mechanism.closures.evaluate(
-                forward_kinematics(self.model, q, qd)).jacobian
+        jacobian = self.mechanism.closure_jacobian(q)  # one kernel call, whatever M is
         return np.linalg.svd(jacobian, compute_uv=False)
 
     # ------------------------------------------------------------------ outputs
@@ -465,7 +454,8 @@ class Simulator:
                       if model.points else np.zeros((0, 2)))
             segments = link_segments(model, kin)
         energy = mech.energies(ev, self.qd)
-        dissipation = mech.method.dissipation(ev.closure) if mech.is_penalty else 0.0
+        # sum Kv Cdot^2: the power drawn by the penalty dampers (as pipeline.observe sums it)
+        dissipation = float(np.sum(mech.method.kv * ev.closure.rate**2)) if mech.is_penalty else 0.0
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
