@@ -523,3 +523,37 @@ def test_readers_ignore_a_singular_mass_matrix():
     assert not np.any(reader.mass_matrix(q))
     _close(reader.kinematics(q, qd).origin, forward_kinematics(model, q).origin)
     assert reader.closure_jacobian(q).shape == (model.n_rows, model.n)
+
+
+def test_without_numba_the_kernels_run_as_plain_python():
+    """Where numba is missing, 'auto' gives the same compiled-kernel mechanism running as plain
+    Python (labelled so in summaries), 'numba' is refused, and the results are the kernels'."""
+    script = (
+        "import sys, numpy as np\n"
+        "sys.modules['numba'] = None\n"  # as if numba were not installed
+        "from vjm_ros.core import jit\n"
+        "assert not jit.HAVE_NUMBA\n"
+        "from vjm_ros.core.compiled import make_mechanism\n"
+        "from vjm_ros.core.constraints import ExactClosure\n"
+        "from vjm_ros.scene.loader import load_scene\n"
+        "from oracle.mechanism import Mechanism\n"
+        "m = load_scene('four_bar').model\n"
+        "mech = make_mechanism(m, ExactClosure(), 'auto')\n"
+        "try:\n"
+        "    make_mechanism(m, ExactClosure(), 'numba')\n"
+        "except ValueError as exc:\n"
+        "    assert 'numba' in str(exc)\n"
+        "else:\n"
+        "    raise AssertionError('numba accepted without numba')\n"
+        "q, qd = m.initial_state()\n"
+        "x = mech.accelerations(q, qd, np.ones(m.n))\n"
+        "y = Mechanism(m, ExactClosure()).accelerations(q, qd, np.ones(m.n))\n"
+        "print(mech.kernel, np.max(np.abs(x - y)) / np.max(np.abs(y)))\n"
+    )
+    here = os.path.dirname(os.path.abspath(__file__))
+    path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH", "")) if p)
+    out = subprocess.run([sys.executable, "-W", "error", "-c", script],
+                         env=dict(os.environ, PYTHONPATH=path), capture_output=True, text=True,
+                         timeout=300, check=True)
+    label, diff = out.stdout.split()
+    assert label == "python" and float(diff) <= RTOL

@@ -151,12 +151,13 @@ class Mechanism:
     evaluations : int
         Right-hand sides evaluated so far (RK4 counts four per step).
     kernel : str
-        ``"numba"`` (for run summaries).
+        ``"numba"``, or ``"python"`` where numba is missing and the kernels run as plain Python
+        (for run summaries and log metadata).
     warm_up_time : float
         Seconds the constructor spent compiling or loading the kernel (nan without warm-up).
     """
 
-    kernel = "numba"
+    kernel = "numba" if K.HAVE_NUMBA else "python"
 
     def __init__(
         self, model: Model, method: PenaltyClosure | ExactClosure, warm_up: bool = True
