@@ -119,3 +119,5 @@ def test_bad_inputs_exit_2():
     assert out.returncode == 2 and "stability bound" in out.stderr and "tip_pin" in out.stderr
     out = vjm("run", "four_bar", "--integrator", "nope")
     assert out.returncode == 2 and "rk4" in out.stderr
+    out = vjm("run", "four_bar", "--kernel", "numpy", "--duration", "0.01")
+    assert out.returncode == 2 and "no longer a choice" in out.stderr and "'auto'" in out.stderr

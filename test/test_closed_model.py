@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracle.mechanism import Mechanism
 
 from vjm_ros.control import ClosedChainModel, InfeasibleEffortsError, SingularConfigurationError
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.core.mechanism import Mechanism
 
 SCENES = ["five_bar", "three_chain", "four_bar", "six_bar"]
 
@@ -211,17 +211,33 @@ def test_vjm_model_prints_what_the_api_computes():
 
 @pytest.mark.parametrize("name", SCENES)
 def test_compiled_path_equals_the_numpy_formulation(name):
-    """Joint-space inverse dynamics runs compiled; the numpy reduced dynamics agree to 1e-12."""
+    """Joint-space inverse dynamics runs compiled; the reduced dynamics, the task Jacobian and
+    bias of the package (from the kernels' M, b, A) and those of the numpy oracle
+    (test/oracle/closed_model.py) agree to 1e-11: the same formulas summed in another order,
+    through solves with A_v and S^T B of condition ~1e1-1e3 on these poses."""
+    from oracle import closed_model as oracle
+
     from vjm_ros.control import distribute
 
     m = ClosedChainModel.from_scene(name)
     q, qd, _ = state(m)
     udd = np.linspace(0.4, -0.3, m.dof)
+    m_r, c_r, g_r, s_map, s, p = oracle.reduced_dynamics(m.model, m.independent, q, qd)
     rd = m.reduced_dynamics(q, qd)
-    w = rd.mass_matrix @ udd + rd.coriolis + rd.gravity
-    expected = distribute(rd.effort_map, w, np.full(len(m.limits), np.inf))
+    for got, want in ((rd.mass_matrix, m_r), (rd.coriolis, c_r), (rd.gravity, g_r),
+                      (rd.velocity_map, s_map), (rd.acceleration_bias, s), (rd.effort_map, p)):
+        np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-11 * max(1.0, np.abs(want).max()))
+    w = m_r @ udd + c_r + g_r
+    expected = distribute(p, w, np.full(len(m.limits), np.inf))
     got = m.inverse_dynamics(q, qd, udd, respect_limits=False)
     np.testing.assert_allclose(got, expected, rtol=1e-11, atol=1e-11)
+    for point in m.model.points:
+        x, a_bias, jac = oracle.point_terms(m.model, point.ref.link, point.ref.local, q, qd)
+        np.testing.assert_allclose(m.forward_kinematics(q, point.name), x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(m.task_jacobian(q, point.name), jac @ s_map, rtol=1e-11,
+                                   atol=1e-11)
+        np.testing.assert_allclose(m.task_bias(q, qd, point.name), jac @ s + a_bias,
+                                   rtol=1e-11, atol=1e-11 * max(1.0, np.abs(a_bias).max()))
     with pytest.raises(ConfigurationError, match="qd: expected finite"):
         m.inverse_dynamics(q, np.full(m.n, np.nan), udd)
     with pytest.raises(ConfigurationError, match="meets the closures"):
@@ -233,7 +249,7 @@ def test_reduced_dynamics_balance_the_power_of_the_energies(name):
     """Oracle: d(T + V)/dt along a motion equals ud . (M_r udd + c_r + g_r), the power the
     actuators deliver (B tau . qd = (S^T B tau) . ud). T and V come from the energy functions
     of the open chains (mass-centre velocities and heights), differentiated numerically."""
-    from vjm_ros.core.dynamics import kinetic_energy, potential_energy
+    from oracle.dynamics import kinetic_energy, potential_energy
 
     m = ClosedChainModel.from_scene(name)
     q, qd, ud = state(m)

@@ -13,12 +13,13 @@ from __future__ import annotations
 import chains as ch
 import numpy as np
 import pytest
+from oracle.constraints import ClosureSet
+from oracle.dynamics import bias_forces, mass_matrix
+from oracle.kinematics import forward_kinematics
+from oracle.mechanism import Mechanism
 
-from vjm_ros.core.constraints import ClosureSet, ExactClosure, PenaltyClosure
-from vjm_ros.core.dynamics import bias_forces, mass_matrix
+from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import StiffnessError
-from vjm_ros.core.kinematics import forward_kinematics
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import ANGLE, GROUND, HINGE, SLIDER, Closure, Model, PointRef
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator

@@ -11,9 +11,7 @@ from __future__ import annotations
 import chains as ch
 import numpy as np
 import pytest
-from scipy.special import ellipk
-
-from vjm_ros.core.dynamics import (
+from oracle.dynamics import (
     bias_forces,
     forward_dynamics,
     inverse_dynamics,
@@ -21,6 +19,8 @@ from vjm_ros.core.dynamics import (
     mass_matrix,
     potential_energy,
 )
+from scipy.special import ellipk
+
 from vjm_ros.core.model import PRISMATIC, REVOLUTE, Actuator, Chain, Joint, Link, Model
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 

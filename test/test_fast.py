@@ -1,4 +1,4 @@
-"""The compiled kernel (:mod:`vjm_ros.core.compiled`) reproduces the numpy reference (:mod:`vjm_ros.core.mechanism`).
+"""The compiled kernel (:mod:`vjm_ros.core.compiled`) reproduces the numpy oracle (:mod:`oracle.mechanism`).
 
 Tolerances. Both implementations evaluate the same formulas in double precision but sum in another
 order, factor ``M`` by LU with partial pivoting (LAPACK ``dgesv`` / a scalar loop) and diagonalize
@@ -30,6 +30,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from oracle.fixed import (
+    RK4,
+    ExplicitEuler,
+    ImplicitPenaltyEuler,
+    SemiImplicitEuler,
+)
+from oracle.kinematics import forward_kinematics
+from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import (
     HAVE_NUMBA,
@@ -44,14 +52,6 @@ from vjm_ros.core.compiled import (
 )
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.integrators import make_integrator
-from vjm_ros.core.integrators.fixed import (
-    RK4,
-    ExplicitEuler,
-    ImplicitPenaltyEuler,
-    SemiImplicitEuler,
-)
-from vjm_ros.core.kinematics import forward_kinematics
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import (
     ANGLE,
     GROUND,
@@ -262,7 +262,6 @@ def test_evaluate_every_term(name, model, kind):
         _close(b.qdd, a.qdd, tol)
         _close(b.row_force, a.row_force, tol)
         _close(fast.energies(b, qd), ref.energies(a, qd))
-        _close(fast.energies(a, qd), ref.energies(a, qd))  # a reference Evaluation also works
         _close(fast.closures.errors(b.closure), ref.closures.errors(a.closure))
         _close(
             fast.closures.closure_forces(b.closure, b.row_force),
@@ -384,13 +383,14 @@ def test_fuse_integrator_choices():
         assert fuse_integrator(plain, ref) is plain
     adaptive = make_integrator("rk45")
     assert fuse_integrator(adaptive, fast) is adaptive
-    assert FusedRK4().stability_bound(0.0) == pytest.approx(RK4().stability_bound(0.0))
+    assert FusedRK4().stability_bound(0.0) == pytest.approx(make_integrator("rk4").stability_bound(0.0))
 
 
 def test_make_mechanism():
     model = load_scene("four_bar").model
     method = _method("exact", model.n_rows)
-    assert type(make_mechanism(model, method, "numpy")) is Mechanism
+    with pytest.raises(ValueError, match="'numpy' is no longer a choice.*use 'auto' or 'numba'"):
+        make_mechanism(model, method, "numpy")
     assert isinstance(make_mechanism(model, method, "numba"), FastMechanism)
     assert isinstance(make_mechanism(model, method), FastMechanism)
     with pytest.raises(ValueError, match="kernel"):
@@ -443,7 +443,7 @@ def test_kernel_without_compilation():
         "from vjm_ros.core.constraints import ExactClosure, PenaltyClosure\n"
         "from vjm_ros.core.compiled import FastMechanism, FusedRK4\n"
         "from vjm_ros.scene.loader import load_scene\n"
-        "from vjm_ros.core.mechanism import Mechanism\n"
+        "from oracle.mechanism import Mechanism\n"
         "worst = 0.0\n"
         "for name in ('four_bar', 'rrr_platform', 'double_slider'):\n"
         "    m = load_scene(name).model\n"
@@ -459,9 +459,101 @@ def test_kernel_without_compilation():
         "        worst = max(worst, np.max(np.abs(x - y)) / np.max(np.abs(x)))\n"
         "print(worst)\n"
     )
-    env = dict(os.environ, NUMBA_DISABLE_JIT="1")
+    here = os.path.dirname(os.path.abspath(__file__))  # the oracle package lives next to this file
+    path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH", "")) if p)
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1", PYTHONPATH=path)
     out = subprocess.run(
         [sys.executable, "-W", "error", "-c", script], env=env, capture_output=True, text=True,
         timeout=300, check=True,
     )
     assert float(out.stdout.strip().splitlines()[-1]) <= RTOL
+
+
+# ---------------------------------------------------------------------------------- readers
+@pytest.mark.parametrize("name,model", MODELS, ids=MODEL_IDS)
+def test_readers_match_the_oracle(name, model):
+    """What assembly, replay, the builder and the controllers read through the kernels (link
+    frames, closure residuals, ``M``, the motion and Jacobian of link points) equals the oracle's:
+    the same formulas summed in another order, 1e-12 relative (module docstring)."""
+    from oracle.constraints import ClosureSet
+    from oracle.dynamics import mass_matrix
+    from oracle.kinematics import point_jacobians, point_motion
+
+    from vjm_ros.core.mechanism import Mechanism as Compiled
+    from vjm_ros.core.mechanism import forward_kinematics as kernel_kinematics
+    from vjm_ros.core.mechanism import point_reader
+    from vjm_ros.core.model import PointRef
+
+    rng = np.random.default_rng(13)
+    reader = Compiled.reader(model)
+    refs = [PointRef(-1, (0.3, -0.2))] + [PointRef(i, tuple(rng.normal(size=2))) for i in range(model.n)]
+    points = point_reader(model, refs)
+    links = np.array([r.link for r in refs])
+    local = np.array([r.local for r in refs])
+    for q, qd, _ in [(*model.initial_state(), None)] + _states(rng, model, ExactClosure(), 5):
+        ref_kin = forward_kinematics(model, q, qd)
+        for kin in (reader.kinematics(q, qd), kernel_kinematics(model, q, qd)):
+            for field in ("theta", "origin", "omega", "v_origin", "a_origin", "rotation"):
+                _close(getattr(kin, field), getattr(ref_kin, field))
+        still = reader.kinematics(q)
+        _close(still.origin, ref_kin.origin)
+        assert not np.any(still.omega)
+        dyn, closure = reader.terms(q, jacobian=False)
+        _close(closure.residual, ClosureSet(model).evaluate(ref_kin, jacobian=False).residual)
+        assert not np.any(dyn.mass_matrix) and not np.any(closure.jacobian)
+        _close(reader.mass_matrix(q), mass_matrix(model, q))
+        p, _, a = point_motion(ref_kin, links, local)
+        rows = points.terms(q, qd)[1]
+        _close(rows.residual.reshape(-1, 2), p)
+        _close(rows.bias.reshape(-1, 2), a)
+        _close(rows.jacobian.reshape(-1, 2, model.n), point_jacobians(model, ref_kin, links, p))
+    assert reader.evaluations == 0
+
+
+def test_readers_ignore_a_singular_mass_matrix():
+    """Geometry is read where ``M`` is singular (the builder names such scenes): no error, and
+    ``M`` comes back as it is, singular."""
+    model = load_scene("four_bar").model
+    links = tuple(replace(lk, mass=0.0, inertia=0.0) for lk in model.links)
+    massless = Model.build("massless", model.chains, links, model.joints, model.closures)
+    from vjm_ros.core.mechanism import Mechanism as Compiled
+
+    reader = Compiled.reader(massless)
+    q, qd = model.initial_state()
+    assert not np.any(reader.mass_matrix(q))
+    _close(reader.kinematics(q, qd).origin, forward_kinematics(model, q).origin)
+    assert reader.closure_jacobian(q).shape == (model.n_rows, model.n)
+
+
+def test_without_numba_the_kernels_run_as_plain_python():
+    """Where numba is missing, 'auto' gives the same compiled-kernel mechanism running as plain
+    Python (labelled so in summaries), 'numba' is refused, and the results are the kernels'."""
+    script = (
+        "import sys, numpy as np\n"
+        "sys.modules['numba'] = None\n"  # as if numba were not installed
+        "from vjm_ros.core import jit\n"
+        "assert not jit.HAVE_NUMBA\n"
+        "from vjm_ros.core.compiled import make_mechanism\n"
+        "from vjm_ros.core.constraints import ExactClosure\n"
+        "from vjm_ros.scene.loader import load_scene\n"
+        "from oracle.mechanism import Mechanism\n"
+        "m = load_scene('four_bar').model\n"
+        "mech = make_mechanism(m, ExactClosure(), 'auto')\n"
+        "try:\n"
+        "    make_mechanism(m, ExactClosure(), 'numba')\n"
+        "except ValueError as exc:\n"
+        "    assert 'numba' in str(exc)\n"
+        "else:\n"
+        "    raise AssertionError('numba accepted without numba')\n"
+        "q, qd = m.initial_state()\n"
+        "x = mech.accelerations(q, qd, np.ones(m.n))\n"
+        "y = Mechanism(m, ExactClosure()).accelerations(q, qd, np.ones(m.n))\n"
+        "print(mech.kernel, np.max(np.abs(x - y)) / np.max(np.abs(y)))\n"
+    )
+    here = os.path.dirname(os.path.abspath(__file__))
+    path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH", "")) if p)
+    out = subprocess.run([sys.executable, "-W", "error", "-c", script],
+                         env=dict(os.environ, PYTHONPATH=path), capture_output=True, text=True,
+                         timeout=300, check=True)
+    label, diff = out.stdout.split()
+    assert label == "python" and float(diff) <= RTOL

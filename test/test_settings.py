@@ -86,3 +86,13 @@ def test_every_user_setting_reaches_the_settings():
              "atol": 1e-7}
     s = resolve_settings({}, {}, **given)
     assert {k: getattr(s, k) for k in given} == given
+
+
+def test_the_numpy_kernel_is_refused_with_what_to_use_instead():
+    """The physics runs only in the compiled kernels: 'numpy' names the two choices left."""
+    with pytest.raises(ConfigurationError, match="'numpy' is no longer a choice.*'auto' or 'numba'"):
+        SimulationSettings(kernel="numpy").validated()
+    with pytest.raises(ConfigurationError, match="expected 'auto' or 'numba', found 'cuda'"):
+        SimulationSettings(kernel="cuda").validated()
+    with pytest.raises(ConfigurationError, match="kernel: expected one of 'auto', 'numba', found 'numpy'"):
+        NodeConfig.from_values({"kernel": "numpy"})

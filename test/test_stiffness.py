@@ -20,11 +20,11 @@ from dataclasses import replace
 import chains as ch
 import numpy as np
 import pytest
+from oracle.mechanism import Mechanism
 
 from vjm_ros.core.constraints import closure_mobility, penalty_modes
 from vjm_ros.core.errors import DivergenceError, StiffnessError
 from vjm_ros.core.integrators import make_integrator
-from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.scene.loader import load_scene, parse_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 

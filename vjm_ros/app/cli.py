@@ -103,9 +103,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument(
         "--kernel",
-        choices=["auto", "numba", "numpy"],
+        metavar="{auto,numba}",
         default="auto",
-        help="physics kernel: compiled (numba) or the numpy reference (default: auto)",
+        help="physics kernels: 'auto' (machine code with numba, plain Python without) or "
+        "'numba' (an error without numba) (default: auto)",
     )
     r.add_argument(
         "--no-stiffness-check",

@@ -24,9 +24,10 @@ A singular configuration is one where ``A_v`` loses rank (the dependent coordina
 determined by the independent ones); :meth:`ClosedChainModel.singularity_measure` is the smallest
 singular value of ``A_v`` and every method refuses a pose where it is below
 :data:`SINGULAR_TOLERANCE`. Physics: the package's own kinematics, dynamics and closure rows
-(:mod:`vjm_ros.core`), the same as the simulator's. Joint-space inverse dynamics runs compiled
-(:mod:`vjm_ros.control.compiled`: ~12 us per call on three_chain); the rest uses the numpy
-formulation.
+(:mod:`vjm_ros.core`), the same compiled kernels as the simulator's, read through
+:meth:`~vjm_ros.core.mechanism.Mechanism.terms`. Joint-space inverse dynamics runs compiled as a
+whole (:mod:`vjm_ros.control.compiled`: ~12 us per call on three_chain); the rest forms the
+closed-chain algebra above in numpy from the kernel's ``M``, ``b``, ``A`` and ``Adot qd``.
 """
 
 from __future__ import annotations
@@ -38,10 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_ros.core.constraints import ClosureSet
-from vjm_ros.core.dynamics import dynamics_terms
 from vjm_ros.core.errors import ConfigurationError, VjmError
-from vjm_ros.core.kinematics import forward_kinematics, point_jacobians, point_motion
+from vjm_ros.core.mechanism import Mechanism, point_reader
 from vjm_ros.core.model import Model
 from vjm_ros.scene.assembly import assemble
 from vjm_ros.scene.loader import Scene, load_scene, parse_scene
@@ -112,10 +111,10 @@ class ClosedChainModel:
                  closure_tolerance: float = CLOSURE_TOLERANCE) -> None:
         self.model = model
         self.closure_tolerance = float(closure_tolerance)
-        self.closures = ClosureSet(model)
+        self.mechanism = Mechanism.reader(model)
         self.n = model.n
         q0, _ = model.initial_state()
-        a0 = self.closures.evaluate(forward_kinematics(model, q0, np.zeros(model.n))).jacobian
+        a0 = self.mechanism.terms(q0)[1].jacobian
         rank = int(np.linalg.matrix_rank(a0)) if a0.size else 0
         self.dof = self.n - rank
         names = model.joint_names
@@ -135,7 +134,8 @@ class ClosedChainModel:
         self.actuated = [a.joint for a in model.actuators]
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self.selection = model.actuator_matrix()
-        self._points = {p.name: p.ref for p in model.points}
+        self._points = {p.name: i for i, p in enumerate(model.points)}
+        self._point_reader = point_reader(model, [p.ref for p in model.points])
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -189,21 +189,21 @@ class ClosedChainModel:
             raise ConfigurationError(f"{name}: expected finite values, found {out.tolist()}")
         return out
 
-    def _point(self, point: str):
+    def _point(self, point: str, q: np.ndarray, qd: np.ndarray | None = None):
+        """Position (2,), ``Jdot qd`` (2,) and Jacobian ``dP/dq`` (2, n) of a named point."""
         if point not in self._points:
             raise ConfigurationError(
                 f"point: expected a named point of {self.model.name} "
                 f"({', '.join(self._points)}), found {point!r}")
-        ref = self._points[point]
-        return np.array([ref.link]), np.array([ref.local], dtype=float)
+        rows = slice(2 * self._points[point], 2 * self._points[point] + 2)
+        terms = self._point_reader.terms(q, qd)[1]
+        return terms.residual[rows].copy(), terms.bias[rows].copy(), terms.jacobian[rows].copy()
 
     # ------------------------------------------------------------------ kinematics
     def forward_kinematics(self, q, point: str) -> np.ndarray:
         """World position of a named point, shape (2,), m."""
         q = self.coordinates(q)
-        links, local = self._point(point)
-        p, _, _ = point_motion(forward_kinematics(self.model, q, np.zeros(self.n)), links, local)
-        return p[0]
+        return self._point(point, q)[0]
 
     def link_frame(self, q, link: str) -> tuple[np.ndarray, float]:
         """Origin (m, shape (2,)) and absolute angle (rad) of a link's frame."""
@@ -212,18 +212,18 @@ class ClosedChainModel:
             raise ConfigurationError(f"link: expected a link of {self.model.name} "
                                      f"({', '.join(self.model.link_names)}), found {link!r}")
         i = self.model.link_names.index(link)
-        kin = forward_kinematics(self.model, q)
+        kin = self.mechanism.kinematics(q)
         return kin.origin[i].copy(), float(kin.theta[i])
 
     def closure_residual(self, q) -> np.ndarray:
         """``C(q)``, shape (r,), m or rad."""
         q = self.coordinates(q)
-        return self.closures.evaluate(forward_kinematics(self.model, q), jacobian=False).residual
+        return self.mechanism.terms(q, jacobian=False)[1].residual
 
     def constraint_jacobian(self, q) -> np.ndarray:
         """``A = dC/dq``, shape (r, n)."""
         q = self.coordinates(q)
-        return self.closures.evaluate(forward_kinematics(self.model, q, np.zeros(self.n))).jacobian
+        return self.mechanism.terms(q)[1].jacobian
 
     def assemble(self, u, guess=None, tolerance: float = 1e-10) -> np.ndarray:
         """The full coordinates with the independent ones at ``u``, the closures met.
@@ -256,8 +256,7 @@ class ClosedChainModel:
 
     # ------------------------------------------------------------------ the closed chain
     def _terms(self, q: np.ndarray, qd: np.ndarray):
-        kin = forward_kinematics(self.model, q, qd)
-        terms = self.closures.evaluate(kin)
+        terms = self.mechanism.terms(q, qd)[1]
         if terms.residual.size and np.max(np.abs(terms.residual)) > self.closure_tolerance:
             raise ConfigurationError(
                 f"q: expected a state that meets the closures (within {self.closure_tolerance:g}), "
@@ -277,12 +276,12 @@ class ClosedChainModel:
             solve = np.linalg.solve(a_v, np.column_stack((a[:, self.independent], terms.bias)))
             s_map[self.dependent] = -solve[:, : self.dof]
             bias[self.dependent] = -solve[:, self.dof]
-        return kin, s_map, bias
+        return s_map, bias
 
     def velocity_map(self, q) -> np.ndarray:
         """``S``, shape (n, d): ``qd = S ud``."""
         q = self.coordinates(q)
-        return self._terms(q, np.zeros(self.n))[1]
+        return self._terms(q, np.zeros(self.n))[0]
 
     def dependent_velocities(self, q, ud) -> np.ndarray:
         """Full joint rates ``qd = S ud``, shape (n,)."""
@@ -297,25 +296,22 @@ class ClosedChainModel:
     def task_jacobian(self, q, point: str) -> np.ndarray:
         """``J_t``, shape (2, d): ``xd = J_t ud`` for a named point, m per rad (or m)."""
         q = self.coordinates(q)
-        links, local = self._point(point)
-        kin, s_map, _ = self._terms(q, np.zeros(self.n))
-        p, _, _ = point_motion(kin, links, local)
-        return point_jacobians(self.model, kin, links, p)[0] @ s_map
+        s_map, _ = self._terms(q, np.zeros(self.n))
+        return self._point(point, q)[2] @ s_map
 
     def task_bias(self, q, qd, point: str) -> np.ndarray:
         """``J s + Jdot qd``, shape (2,), m/s^2: ``xdd = J_t udd + task_bias``."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
-        links, local = self._point(point)
-        kin, _, s = self._terms(q, qd)
-        p, _, a_bias = point_motion(kin, links, local)
-        return point_jacobians(self.model, kin, links, p)[0] @ s + a_bias[0]
+        _, s = self._terms(q, qd)
+        _, a_bias, jac = self._point(point, q, qd)
+        return jac @ s + a_bias
 
     def reduced_dynamics(self, q, qd) -> ReducedDynamics:
         """``M_r``, ``c_r``, ``g_r`` (and ``S``, ``s``, ``P``) at a state (see the module doc)."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
-        _, s_map, s = self._terms(q, qd)
-        full = dynamics_terms(self.model, q, qd)
-        still = dynamics_terms(self.model, q, np.zeros(self.n))
+        s_map, s = self._terms(q, qd)
+        full = self.mechanism.terms(q, qd)[0]
+        still = self.mechanism.terms(q)[0]
         m_r = s_map.T @ full.mass_matrix @ s_map
         g_r = s_map.T @ still.bias
         c_r = s_map.T @ (full.mass_matrix @ s + full.bias - still.bias)

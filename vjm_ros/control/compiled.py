@@ -4,7 +4,7 @@ One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.step`, 
 ``M``, ``b``, ``A``, ``Adot qd`` and ``C`` into preallocated buffers; one compiled function
 (:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
 ``P = S^T B`` and the minimum ``W``-norm efforts. The algebra is that of
-:mod:`vjm_ros.control.closed_model` (checked equal there to round-off), without Python-level
+:mod:`vjm_ros.control.closed_model` (checked equal to round-off in the tests), without Python-level
 array operations: the cost is the two calls' entry overhead plus a few microseconds of arithmetic.
 """
 
@@ -83,9 +83,9 @@ class CompiledInverseDynamics:
     """
 
     def __init__(self, model: Model, independent: list[int]) -> None:
-        from vjm_ros.core.compiled import FastMechanism
+        from vjm_ros.core.mechanism import Mechanism
 
-        self.mech = FastMechanism(model, ExactClosure(alpha=0.0, beta=0.0))
+        self.mech = Mechanism(model, ExactClosure(alpha=0.0, beta=0.0))
         n, self.n = model.n, model.n
         self.buffers = self.mech._new_buffers()
         self.args = (self.mech._lint, self.mech._lflt, self.mech._cint, self.mech._cflt,

@@ -1,16 +1,13 @@
-"""Loop closures: residuals ``C(q)``, Jacobians ``A = dC/dq``, and the two ways to enforce them.
+"""Loop closures: the two ways to enforce them, their rows, and the modes of penalty closures.
 
-Rows (docs/design.md section 2):
+Rows (docs/design.md section 2; computed by :func:`vjm_ros.core.kernels.terms`):
 
 * ``hinge``: ``C = Pa - Pb`` (2 rows, m);
 * ``slider``: ``C = (Pa - P0) . n_d`` with ``n_d = e_z x d`` the line normal (1 row, m); the line
   may be carried by a link, then ``d`` and ``P0`` turn with it;
 * ``angle``: ``C = wrap(theta_a - theta_b - offset)`` (1 row, rad).
 
-For every row this module also gives ``Cdot = A qd`` and the velocity-product term ``Adot qd``
-(the part of ``Cddot`` that does not depend on ``qdd``), which the exact method needs.
-
-Enforcement:
+Enforcement (settings here, formulas in the kernels):
 
 * :class:`PenaltyClosure`: force ``F = -(Kp C + Kv Cdot)`` per row, generalized force ``A^T F``;
 * :class:`ExactClosure`: multipliers from ``A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot
@@ -18,6 +15,7 @@ Enforcement:
   singular pose or redundant closures) gives the minimum-norm multipliers instead of a blow-up.
 
 Both report each closure's force as a world-frame vector ``(Fx, Fy, Mz)`` acting on ``Pa``.
+:func:`penalty_modes` judges penalty gains against a step (the stiffness check).
 """
 
 from __future__ import annotations
@@ -26,8 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vjm_ros.core.kinematics import Kinematics, angular_jacobian, point_jacobians, point_motion
-from vjm_ros.core.model import ANGLE, GROUND, HINGE, SLIDER, Model
+from vjm_ros.core.model import Model
 
 
 @dataclass
@@ -58,12 +55,20 @@ class ClosureTerms:
     points: np.ndarray
 
 
-class ClosureSet:
-    """Evaluates all closures of a model together.
+class ClosureRows:
+    """The row layout of a model's closures and the per-closure reductions of row quantities.
 
     Parameters
     ----------
     model : Model
+
+    Attributes
+    ----------
+    closures : tuple of Closure
+    n_rows : int
+        ``r``, the number of rows.
+    row_closure : ndarray of int, shape (r,)
+        Closure of each row.
     """
 
     def __init__(self, model: Model):
@@ -73,12 +78,7 @@ class ClosureSet:
         self.row_closure = np.array(
             [k for k, c in enumerate(self.closures) for _ in range(c.rows)], dtype=int
         )
-        links, local = [], []
-        for c in self.closures:
-            links += [c.point.link, c.target.link]
-            local += [c.point.local, c.target.local]
-        self._links = np.array(links, dtype=int).reshape(-1)
-        self._local = np.array(local, dtype=float).reshape(-1, 2)
+        self._starts = np.array([sl.start for sl in self.row_slices()], dtype=np.intp)
 
     def row_slices(self) -> list[slice]:
         """Row range of each closure in the stacked residual."""
@@ -88,75 +88,6 @@ class ClosureSet:
             start += c.rows
         return out
 
-    def evaluate(self, kin: Kinematics, jacobian: bool = True) -> ClosureTerms:
-        """Residuals, rates, Jacobian and bias terms of every closure.
-
-        Parameters
-        ----------
-        kin : Kinematics
-            From :func:`vjm_ros.core.kinematics.forward_kinematics` with rates.
-        jacobian : bool
-            Skip ``A`` and ``Adot qd`` when False (they are then zero arrays).
-
-        Returns
-        -------
-        ClosureTerms
-        """
-        model = self.model
-        r, n = self.n_rows, model.n
-        res = np.zeros(r)
-        rate = np.zeros(r)
-        jac = np.zeros((r, n))
-        bias = np.zeros(r)
-        direction = np.zeros((r, 3))
-        k = len(self.closures)
-        points = np.zeros((k, 2))
-        if k == 0:
-            return ClosureTerms(res, rate, jac, bias, direction, points)
-        p, v, a = point_motion(kin, self._links, self._local)
-        jp = point_jacobians(model, kin, self._links, p) if jacobian else None
-        row = 0
-        for i, c in enumerate(self.closures):
-            ia, ib = 2 * i, 2 * i + 1
-            points[i] = p[ia]
-            if c.kind == HINGE:
-                res[row : row + 2] = p[ia] - p[ib]
-                rate[row : row + 2] = v[ia] - v[ib]
-                direction[row, 0] = 1.0
-                direction[row + 1, 1] = 1.0
-                if jacobian:
-                    jac[row : row + 2] = jp[ia] - jp[ib]
-                    bias[row : row + 2] = a[ia] - a[ib]
-                row += 2
-            elif c.kind == SLIDER:
-                lk = c.target.link
-                rot = kin.rotation[lk]
-                d = rot @ np.asarray(c.direction)
-                nd = np.array((-d[1], d[0]))
-                w = kin.omega[lk]
-                dp, dv = p[ia] - p[ib], v[ia] - v[ib]
-                res[row] = dp @ nd
-                rate[row] = dv @ nd - w * (dp @ d)
-                direction[row, :2] = nd
-                if jacobian:
-                    jrow = nd @ (jp[ia] - jp[ib])
-                    if lk != GROUND:
-                        jrow = jrow - (dp @ d) * angular_jacobian(model, np.array([lk]))[0]
-                    jac[row] = jrow
-                    bias[row] = (a[ia] - a[ib]) @ nd - 2.0 * w * (dv @ d) - w * w * (dp @ nd)
-                row += 1
-            elif c.kind == ANGLE:
-                la, lb = c.point.link, c.target.link
-                diff = kin.theta[la] - kin.theta[lb] - c.offset
-                res[row] = (diff + np.pi) % (2.0 * np.pi) - np.pi
-                rate[row] = kin.omega[la] - kin.omega[lb]
-                direction[row, 2] = 1.0
-                if jacobian:
-                    jw = angular_jacobian(model, np.array([la, lb]))
-                    jac[row] = jw[0] - jw[1]
-                row += 1
-        return ClosureTerms(res, rate, jac, bias, direction, points)
-
     def errors(self, terms: ClosureTerms) -> np.ndarray:
         """Size of each closure's residual (norm over its rows).
 
@@ -165,9 +96,9 @@ class ClosureSet:
         ndarray, shape (k,)
             m for hinge and slider, rad for angle.
         """
-        sq = np.zeros(len(self.closures))
-        np.add.at(sq, self.row_closure, terms.residual**2)
-        return np.sqrt(sq)
+        if not len(self._starts):
+            return np.zeros(0)
+        return np.sqrt(np.add.reduceat(terms.residual**2, self._starts))
 
     def closure_forces(self, terms: ClosureTerms, row_force: np.ndarray) -> np.ndarray:
         """World-frame force of each closure from per-row forces.
@@ -182,9 +113,9 @@ class ClosureSet:
         ndarray, shape (k, 3)
             ``(Fx, Fy, Mz)`` acting on ``Pa``: N, N, N m.
         """
-        out = np.zeros((len(self.closures), 3))
-        np.add.at(out, self.row_closure, terms.row_direction * row_force[:, None])
-        return out
+        if not len(self._starts):
+            return np.zeros((0, 3))
+        return np.add.reduceat(terms.row_direction * row_force[:, None], self._starts, axis=0)
 
 
 @dataclass
@@ -203,18 +134,6 @@ class PenaltyClosure:
     kv: np.ndarray
 
     method = "penalty"
-
-    def row_forces(self, terms: ClosureTerms) -> np.ndarray:
-        """Per-row closure force, N or N m."""
-        return -(self.kp * terms.residual + self.kv * terms.rate)
-
-    def energy(self, terms: ClosureTerms) -> float:
-        """Energy stored in the penalty springs ``sum 1/2 Kp C^2``, J."""
-        return 0.5 * float(np.sum(self.kp * terms.residual**2))
-
-    def dissipation(self, terms: ClosureTerms) -> float:
-        """Power drawn by the penalty dampers ``sum Kv Cdot^2``, W."""
-        return float(np.sum(self.kv * terms.rate**2))
 
 
 def closure_mobility(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
@@ -364,31 +283,6 @@ def penalty_modes(
                         stiffness, damping)
 
 
-def solve_multipliers(g: np.ndarray, rhs: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
-    """Minimum-norm solution of ``G lambda = rhs`` for symmetric positive semi-definite ``G``.
-
-    Eigenvalues below ``rcond * max eigenvalue`` are treated as zero, so directions that the
-    closures do not constrain independently (rank loss of ``A``) receive no multiplier.
-
-    Parameters
-    ----------
-    g : ndarray, shape (r, r)
-    rhs : ndarray, shape (r,)
-    rcond : float
-
-    Returns
-    -------
-    ndarray, shape (r,)
-    """
-    if g.shape[0] == 0:
-        return np.zeros(0)
-    w, v = np.linalg.eigh(g)
-    keep = w > rcond * max(float(w[-1]), 1e-300)
-    inv = np.zeros_like(w)
-    inv[keep] = 1.0 / w[keep]
-    return v @ (inv * (v.T @ rhs))
-
-
 @dataclass
 class ExactClosure:
     """Closure by Lagrange multipliers at acceleration level with Baumgarte stabilization.
@@ -411,49 +305,3 @@ class ExactClosure:
     rcond: float = 1e-10
 
     method = "exact"
-
-    def accelerations(
-        self, mass_matrix: np.ndarray, force: np.ndarray, terms: ClosureTerms
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Constrained accelerations and multipliers.
-
-        Parameters
-        ----------
-        mass_matrix : ndarray, shape (n, n)
-        force : ndarray, shape (n,)
-            ``Q = tau - b``, the generalized force without closures.
-        terms : ClosureTerms
-
-        Returns
-        -------
-        qdd : ndarray, shape (n,)
-        lam : ndarray, shape (r,)
-            Row multipliers (the closure force per row, N or N m): ``M qdd = Q + A^T lam``.
-        """
-        a = terms.jacobian
-        if a.shape[0] == 0:
-            return np.linalg.solve(mass_matrix, force), np.zeros(0)
-        x = np.linalg.solve(mass_matrix, np.column_stack((force, a.T)))
-        minv_q, minv_at = x[:, 0], x[:, 1:]
-        g = a @ minv_at
-        rhs = -(
-            a @ minv_q + terms.bias + 2.0 * self.alpha * terms.rate + self.beta**2 * terms.residual
-        )
-        lam = solve_multipliers(g, rhs, self.rcond)
-        return minv_q + minv_at @ lam, lam
-
-
-def project_velocity(
-    mass_matrix: np.ndarray, jacobian: np.ndarray, qd: np.ndarray, rcond: float = 1e-10
-) -> np.ndarray:
-    """Remove the part of ``qd`` that violates ``A qd = 0`` (kinetic-energy metric).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-    """
-    if jacobian.shape[0] == 0:
-        return qd
-    minv_at = np.linalg.solve(mass_matrix, jacobian.T)
-    g = jacobian @ minv_at
-    return qd - minv_at @ solve_multipliers(g, jacobian @ qd, rcond)

@@ -1,7 +1,7 @@
-"""Compiled kernels behind :class:`vjm_ros.core.compiled.FastMechanism`.
+"""Compiled kernels behind :class:`vjm_ros.core.mechanism.Mechanism`: the package's one source of the physics.
 
-The same physics as :mod:`vjm_ros.core.kinematics`, :mod:`vjm_ros.core.dynamics`, :mod:`vjm_ros.core.constraints`
-and :mod:`vjm_ros.core.mechanism`, written as scalar loops over the links so that numba compiles them to
+Kinematics, dynamics, closure rows, their enforcement and the fixed-step methods (checked against
+the independent numpy formulation in ``test/oracle/``), written as scalar loops over the links so that numba compiles them to
 machine code (``cache=True``: compiled once per machine, then loaded from the cache). Without numba
 the same functions run as plain Python, which is correct but slow.
 

@@ -1,25 +1,68 @@
-"""The closed mechanism as an ODE: open-chain dynamics plus the chosen closure method.
+"""The closed mechanism: open-chain dynamics plus the chosen closure method, in compiled kernels.
 
-:class:`Mechanism` is what integrators see: ``accelerations(q, qd, tau)`` and, for methods that
-treat the penalty forces implicitly, the pieces of the linearized step.
+:class:`Mechanism` is what the simulator, the integrators, the node, the controllers and the
+studies see. Every quantity comes from the scalar chain recursions of :mod:`vjm_ros.core.kernels`
+(compiled by numba, or run as plain Python where numba is missing) through one entry point,
+:func:`vjm_ros.core.kernels.step`:
+
+* ``accelerations``, ``implicit_penalty_velocity``, ``evaluate``, ``energies`` and ``project``:
+  the equations of motion (docs/design.md sections 1-2);
+* :meth:`Mechanism.advance_fixed` runs whole control ticks of a fixed-step integrator in one
+  compiled call, :meth:`Mechanism.advance_observed` observes every tick as well
+  (:mod:`vjm_ros.core.pipeline`);
+* :meth:`Mechanism.closure_errors`, :meth:`~Mechanism.closure_jacobian`,
+  :meth:`~Mechanism.kinematics`, :meth:`~Mechanism.terms` and :meth:`~Mechanism.mass_matrix`
+  read single quantities for the divergence guard, assembly, replay and the controllers.
+
+An independent numpy formulation of the same physics lives in the test suite (``test/oracle/``),
+which checks the kernels against it.
+
+>>> from vjm_ros.scene.loader import load_scene
+>>> from vjm_ros.core.constraints import PenaltyClosure
+>>> import numpy as np
+>>> model = load_scene("four_bar").model
+>>> mech = Mechanism(model, PenaltyClosure(np.full(2, 1e5), np.full(2, 100.0)))
+>>> q, qd = model.initial_state()
+>>> mech.accelerations(q, qd, np.zeros(3)).shape
+(3,)
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from vjm_ros.core.constraints import (
-    ClosureSet,
-    ClosureTerms,
-    ExactClosure,
-    PenaltyClosure,
-    project_velocity,
-    solve_multipliers,
-)
-from vjm_ros.core.dynamics import DynamicsTerms, dynamics_terms, energy_from_terms
-from vjm_ros.core.model import Model
+from vjm_ros.core import kernels as K
+from vjm_ros.core import pipeline
+from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
+from vjm_ros.core.kinematics import Kinematics
+from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
+from vjm_ros.core.packing import chain_blocks, pack_method, pack_model
+
+
+@dataclass
+class DynamicsTerms:
+    """Everything the equations of motion need at one state.
+
+    Attributes
+    ----------
+    kin : Kinematics
+    mass_matrix : ndarray, shape (n, n)
+    bias : ndarray, shape (n,)
+        ``b(q, qd)`` such that ``M qdd + b = tau``, N m or N.
+    com : ndarray, shape (n, 2)
+        Mass centres, m.
+    com_velocity : ndarray, shape (n, 2)
+        m/s.
+    """
+
+    kin: Kinematics
+    mass_matrix: np.ndarray
+    bias: np.ndarray
+    com: np.ndarray
+    com_velocity: np.ndarray
 
 
 @dataclass
@@ -33,62 +76,197 @@ class Evaluation:
     closure : ClosureTerms
     row_force : ndarray, shape (r,)
         Closure force per row (penalty force or multiplier), N or N m.
+    energy : ndarray, shape (3,)
+        Kinetic, gravitational and penalty-spring energy (0 for exact closures), J.
     """
 
     qdd: np.ndarray
     dyn: DynamicsTerms
     closure: ClosureTerms
     row_force: np.ndarray
+    energy: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def _vec(x) -> np.ndarray:
+    """A C-contiguous float64 vector (no copy when ``x`` already is one)."""
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def _unpack(buffers: tuple[np.ndarray, ...], n: int) -> tuple[DynamicsTerms, ClosureTerms]:
+    """The kernel's output buffers (layout in :mod:`vjm_ros.core.kernels`) as value objects
+    (views of the buffers, nothing copied)."""
+    kin, mm, bias, cm, crow, jac, points = buffers
+    rotation = np.empty((n + 1, 2, 2))
+    rotation[:, 0, 0] = kin[:, K.K_COS]
+    rotation[:, 1, 0] = kin[:, K.K_SIN]
+    rotation[:, 0, 1] = -kin[:, K.K_SIN]
+    rotation[:, 1, 1] = kin[:, K.K_COS]
+    n_pred = np.empty((n, 2))
+    n_pred[:, 0] = -kin[:n, K.K_PSIN]
+    n_pred[:, 1] = kin[:n, K.K_PCOS]
+    kinematics = Kinematics(
+        theta=kin[:, K.K_THETA],
+        origin=kin[:, K.K_OX : K.K_OY + 1],
+        omega=kin[:, K.K_OMEGA],
+        v_origin=kin[:, K.K_VX : K.K_VY + 1],
+        a_origin=kin[:, K.K_AX : K.K_AY + 1],
+        n_pred=n_pred,
+        rotation=rotation,
+        slide=kin[:n, K.K_SLIDE],
+    )
+    dyn = DynamicsTerms(kinematics, mm, bias, cm[:, K.C_X : K.C_Y + 1], cm[:, K.C_VX : K.C_VY + 1])
+    closure = ClosureTerms(
+        residual=crow[:, K.R_RES],
+        rate=crow[:, K.R_RATE],
+        jacobian=jac,
+        bias=crow[:, K.R_BIAS],
+        row_direction=crow[:, K.R_DX : K.R_DZ + 1],
+        points=points,
+    )
+    return dyn, closure
 
 
 class Mechanism:
-    """Open chains closed by penalty forces or multipliers.
+    """Open chains closed by penalty forces or multipliers, evaluated by the compiled kernel.
+
+    The closure method is packed for the kernel when it is assigned: assign a new one rather than
+    changing its gains in place. An instance keeps scratch buffers, so use one instance per
+    thread (the kernel itself releases the GIL).
 
     Parameters
     ----------
     model : Model
     method : PenaltyClosure or ExactClosure
+    warm_up : bool
+        Compile the kernel (or load it from numba's cache) now, so that the first control tick
+        does not pay for it.
+
+    Attributes
+    ----------
+    model : Model
+    closures : ClosureRows
+        Row layout of the closures and the per-closure reductions.
+    n : int
+        Number of coordinates.
+    evaluations : int
+        Right-hand sides evaluated so far (RK4 counts four per step).
+    kernel : str
+        ``"numba"``, or ``"python"`` where numba is missing and the kernels run as plain Python
+        (for run summaries and log metadata).
+    warm_up_time : float
+        Seconds the constructor spent compiling or loading the kernel (nan without warm-up).
     """
 
-    def __init__(self, model: Model, method: PenaltyClosure | ExactClosure):
+    kernel = "numba" if K.HAVE_NUMBA else "python"
+
+    def __init__(
+        self, model: Model, method: PenaltyClosure | ExactClosure, warm_up: bool = True
+    ):
+        self._lint, self._lflt, self._cint, self._cflt = pack_model(model)
+        n, r, k = model.n, model.n_rows, len(model.closures)
+        self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
+        self._buffers = self._new_buffers()
+        self._work = K.workspace(n, r, chain_blocks(model))
+        self._tick_state = pipeline.tick_state(n)
+        self._rows = r
         self.model = model
-        self.method = method
-        self.closures = ClosureSet(model)
-        self.n = model.n
+        self.n = n
         self.evaluations = 0
+        self.method = method
+        self.closures = ClosureRows(model)
+        self.warm_up_time = self.warm_up() if warm_up else float("nan")
+
+    @classmethod
+    def reader(cls, model: Model) -> Mechanism:
+        """A mechanism to read kinematics, closure rows and ``M`` with (:meth:`terms`,
+        :meth:`kinematics`, :meth:`closure_errors`, ...): zero penalty gains, no warm-up call."""
+        zeros = np.zeros(model.n_rows)
+        return cls(model, PenaltyClosure(zeros, zeros), warm_up=False)
+
+    # ------------------------------------------------------------------ plumbing
+    @property
+    def method(self) -> PenaltyClosure | ExactClosure:
+        """The closure method (assigning one re-packs it for the kernel)."""
+        return self._method
+
+    @method.setter
+    def method(self, value: PenaltyClosure | ExactClosure) -> None:
+        self._method = value
+        self._gains, self._par = pack_method(value, self.model)
+        self._packed = (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par)
+
+    def _new_buffers(self) -> tuple[np.ndarray, ...]:
+        """Fresh output buffers ``kin, mm, bias, cm, crow, jac, points`` (see :mod:`._kernels`)."""
+        return tuple(np.empty(shape) for shape in self._shapes)
+
+    def _run(
+        self,
+        op: int,
+        q: np.ndarray,
+        qd: np.ndarray,
+        tau: np.ndarray,
+        h: float = 0.0,
+        steps: int = 1,
+        tol: float = 0.0,
+        buffers: tuple[np.ndarray, ...] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Call :func:`vjm_ros.core.kernels.step` and turn a singular matrix into ``LinAlgError``.
+
+        ``buffers`` receive the terms of the last evaluation (the instance's scratch buffers when
+        omitted). Returns the kernel's two output vectors, fresh arrays of shape (n,).
+        """
+        out_a = np.empty(self.n)
+        out_b = np.empty(self.n)
+        status = K.step(
+            op, q, qd, tau, h, steps, tol, self._lint, self._lflt, self._cint, self._cflt,
+            self._gains, self._par, *(self._buffers if buffers is None else buffers), out_a, out_b,
+            self._work, K.NO_KNOWN, -1,
+        )
+        if status:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return out_a, out_b
+
+    def warm_up(self) -> float:
+        """Compile the kernel, or load it from numba's cache (``evaluations`` unchanged).
+
+        Returns
+        -------
+        float
+            Wall time spent, s: the first-call compile time when the cache is cold.
+        """
+        start = time.perf_counter()
+        q, qd = self.model.initial_state()
+        self._run(K.EVALUATE, q, qd, np.zeros(self.n))
+        return time.perf_counter() - start
 
     @property
     def is_penalty(self) -> bool:
         """True when closures are enforced by penalty forces."""
-        return isinstance(self.method, PenaltyClosure)
+        return isinstance(self._method, PenaltyClosure)
 
-    def evaluate(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
-        """Accelerations and closure forces.
+    # ------------------------------------------------------------------ the equations of motion
+    def accelerations(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """``qdd`` of the closed mechanism.
 
         Parameters
         ----------
         q, qd : ndarray, shape (n,)
+            Coordinates (rad or m) and rates (rad/s or m/s).
         tau : ndarray, shape (n,)
             Generalized efforts, N m or N.
 
         Returns
         -------
-        Evaluation
+        ndarray, shape (n,)
+            rad/s^2 or m/s^2.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            When the mass matrix is exactly singular (as ``numpy.linalg.solve``).
         """
         self.evaluations += 1
-        dyn = dynamics_terms(self.model, q, qd)
-        ct = self.closures.evaluate(dyn.kin)
-        force = tau - dyn.bias
-        if isinstance(self.method, PenaltyClosure):
-            rf = self.method.row_forces(ct)
-            qdd = np.linalg.solve(dyn.mass_matrix, force + ct.jacobian.T @ rf)
-        else:
-            qdd, rf = self.method.accelerations(dyn.mass_matrix, force, ct)
-        return Evaluation(qdd, dyn, ct, rf)
-
-    def accelerations(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """``qdd`` only (what explicit integrators need)."""
-        return self.evaluate(q, qd, tau).qdd
+        return self._run(K.EVALUATE, _vec(q), _vec(qd), _vec(tau))[0]
 
     def implicit_penalty_velocity(
         self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float
@@ -100,58 +278,282 @@ class Mechanism:
         ``(M + h A^T (h Kp + Kv) A) dv = h (Q + A^T (F - h Kp A v))``.
         With exact closures this is the explicit (semi-implicit Euler) velocity update.
 
+        Parameters
+        ----------
+        q, qd, tau : ndarray, shape (n,)
+        h : float
+            Step, s.
+
         Returns
         -------
         ndarray, shape (n,)
+            rad/s or m/s.
         """
-        ev = self.evaluate(q, qd, tau)
-        if not isinstance(self.method, PenaltyClosure):
-            return qd + h * ev.qdd
-        a = ev.closure.jacobian
-        kp, kv = self.method.kp, self.method.kv
-        lhs = ev.dyn.mass_matrix + h * (a.T * (h * kp + kv)) @ a
-        rhs = h * (tau - ev.dyn.bias + a.T @ (ev.row_force - h * kp * (a @ qd)))
-        return qd + np.linalg.solve(lhs, rhs)
+        self.evaluations += 1
+        return self._run(K.IMPLICIT_VELOCITY, _vec(q), _vec(qd), _vec(tau), float(h))[0]
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
+        """Accelerations, closure forces and every derived quantity at one state.
+
+        Parameters
+        ----------
+        q, qd, tau : ndarray, shape (n,)
+
+        Returns
+        -------
+        Evaluation
+            Fresh arrays, some of them views of one another (nothing is shared with later calls).
+        """
+        self.evaluations += 1
+        buffers = self._new_buffers()
+        qdd, _ = self._run(K.EVALUATE, _vec(q), _vec(qd), _vec(tau), buffers=buffers)
+        energy = buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1].copy()
+        buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0
+        dyn, closure = _unpack(buffers, self.n)
+        return Evaluation(qdd, dyn, closure, buffers[4][:, K.R_FORCE], energy)
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
         """Kinetic, potential, constraint and total energy, J.
+
+        Read from the kernel's sums in ``ev`` (the kinetic energy is that of the evaluated state;
+        ``qd`` is kept for the signature).
 
         Returns
         -------
         ndarray, shape (4,)
         """
-        kinetic, potential = energy_from_terms(self.model, ev.dyn, qd)
-        constraint = self.method.energy(ev.closure) if self.is_penalty else 0.0
+        kinetic, potential, constraint = (float(x) for x in ev.energy)
         return np.array([kinetic, potential, constraint, kinetic + potential + constraint])
-
-    def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """The closure Jacobian ``A(q)``, shape (r, n)."""
-        return self.closures.evaluate(dynamics_terms(self.model, q, np.zeros(self.n)).kin).jacobian
 
     def project(
         self, q: np.ndarray, qd: np.ndarray, tol: float = 1e-12, iterations: int = 8
     ) -> tuple[np.ndarray, np.ndarray]:
         """Move ``q`` onto ``C(q) = 0`` and ``qd`` onto ``A qd = 0`` (mass-weighted least change).
 
+        At most ``iterations`` Gauss-Newton steps in the metric of ``M`` until ``max |C| <= tol``,
+        then one velocity projection (minimum-norm, ``rcond = 1e-10``).
+
+        Parameters
+        ----------
+        q, qd : ndarray, shape (n,)
+        tol : float
+            Largest accepted ``|C|``, m or rad.
+        iterations : int
+            Most Gauss-Newton steps.
+
         Returns
         -------
         q, qd : ndarray, shape (n,)
         """
-        if self.closures.n_rows == 0:
+        if self._rows == 0:
             return q, qd
-        q = q.copy()
-        for _ in range(iterations):
-            dyn = dynamics_terms(self.model, q, np.zeros(self.n))
-            ct = self.closures.evaluate(dyn.kin)
-            if np.max(np.abs(ct.residual)) <= tol:
-                break
-            q = q - _weighted_min_norm(dyn.mass_matrix, ct.jacobian, ct.residual)
-        dyn = dynamics_terms(self.model, q, np.zeros(self.n))
-        ct = self.closures.evaluate(dyn.kin)
-        return q, project_velocity(dyn.mass_matrix, ct.jacobian, qd)
+        zero = np.zeros(self.n)
+        return self._run(
+            K.PROJECT, _vec(q), _vec(qd), zero, steps=int(iterations), tol=float(tol)
+        )
+
+    # ------------------------------------------------------------------ extras
+    def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """The closure Jacobian ``A(q)``, shape (r, n), from one kernel call (``evaluations``
+        unchanged: this is not a right-hand side; a singular mass matrix does not matter)."""
+        zero = np.zeros(self.n)
+        K.step(K.EVALUATE, _vec(q), zero, zero, 0.0, 1, 0.0, self._lint, self._lflt, self._cint,
+               self._cflt, self._gains, self._par, *self._buffers, np.empty(self.n),
+               np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        return self._buffers[5].copy()
+
+    def closure_errors(self, q: np.ndarray) -> np.ndarray:
+        """Size of each closure's residual at ``q`` (what the simulator's divergence guard reads).
+
+        The norm over each closure's rows of ``C(q)``, from one kernel call without dynamics.
+
+        Parameters
+        ----------
+        q : ndarray, shape (n,)
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            m for hinge and slider, rad for angle closures.
+        """
+        q = _vec(q)
+        self._run(K.RESIDUAL, q, q, q)
+        res = self._buffers[4][:, K.R_RES].copy()
+        return self.closures.errors(ClosureTerms(res, res, res, res, res, res))
+
+    def kinematics(self, q: np.ndarray, qd: np.ndarray | None = None) -> Kinematics:
+        """Link frames (and rates, with ``qd``) at ``q`` from one kernel call (``evaluations``
+        unchanged; a singular mass matrix does not matter here).
+
+        Parameters
+        ----------
+        q : ndarray, shape (n,)
+        qd : ndarray, shape (n,), optional
+            Rates; zero when omitted.
+
+        Returns
+        -------
+        Kinematics
+            Fresh arrays.
+        """
+        return self.terms(q, qd, jacobian=qd is not None)[0].kin
+
+    def terms(
+        self, q: np.ndarray, qd: np.ndarray | None = None, jacobian: bool = True
+    ) -> tuple[DynamicsTerms, ClosureTerms]:
+        """Kinematics, ``M``, ``b`` and closure rows at a state from one kernel call.
+
+        ``evaluations`` is unchanged and a singular mass matrix raises nothing (no solve is
+        used). With ``jacobian`` False the kernel skips the dynamics and the Jacobian: ``M``,
+        ``b``, ``A``, ``Adot qd``, the mass centres and every rate are then zero.
+
+        Parameters
+        ----------
+        q : ndarray, shape (n,)
+        qd : ndarray, shape (n,), optional
+            Rates; zero when omitted.
+        jacobian : bool
+
+        Returns
+        -------
+        dyn : DynamicsTerms
+        closure : ClosureTerms
+            Fresh arrays.
+        """
+        q = _vec(q)
+        qd = np.zeros(self.n) if qd is None else _vec(qd)
+        buffers = tuple(np.zeros(shape) for shape in self._shapes)
+        K.step(K.EVALUATE if jacobian else K.RESIDUAL, q, qd, np.zeros(self.n), 0.0, 1, 0.0,
+               self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par, *buffers,
+               np.empty(self.n), np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
+        return _unpack(buffers, self.n)
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """Joint-space inertia matrix ``M(q)``, shape (n, n) (kg, kg m, kg m^2)."""
+        return self.terms(q)[0].mass_matrix
+
+    def advance_fixed(
+        self, method: int, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float, steps: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``steps`` fixed steps of one integrator in one compiled call, efforts held.
+
+        Parameters
+        ----------
+        method : int
+            ``_kernels.EXPLICIT_EULER``, ``SEMI_IMPLICIT_EULER``, ``RK4`` or ``IMPLICIT_EULER``.
+        q, qd : ndarray, shape (n,)
+            State at the start, rad or m and rad/s or m/s.
+        tau : ndarray, shape (n,)
+            Efforts, N m or N.
+        h : float
+            Step, s.
+        steps : int
+
+        Returns
+        -------
+        q, qd : ndarray, shape (n,)
+            State after the steps.
+        """
+        if method not in _FIXED_METHODS:
+            raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
+        stages = 4 if method == K.RK4 else 1
+        self.evaluations += stages * int(steps)
+        return self._run(int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(steps))
 
 
-def _weighted_min_norm(mass_matrix: np.ndarray, a: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``M^-1 A^T (A M^-1 A^T)^+ c``: the M-metric least change ``dq`` with ``A dq = c``."""
-    minv_at = np.linalg.solve(mass_matrix, a.T)
-    return minv_at @ solve_multipliers(a @ minv_at, c)
+    def warm_up_pipeline(self) -> float:
+        """Compile the block pipeline (:mod:`vjm_ros.core.pipeline`), or load it from numba's
+        cache, with a call of zero ticks. Returns the wall time spent, s."""
+        start = time.perf_counter()
+        model = self.model
+        q, qd = model.initial_state()
+        links = np.array([p.ref.link for p in model.points], dtype=np.int64)
+        no_ticks = pipeline.new_outputs(0, self.n, len(model.points), len(model.closures))
+        self.advance_observed(K.RK4, q, qd, np.zeros(self.n), 1e-3, 1, False, np.inf,
+                              np.asarray(model.length, dtype=float), links,
+                              np.zeros((len(model.points), 2)), no_ticks)
+        return time.perf_counter() - start
+
+    def advance_observed(
+        self, method: int, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float,
+        substeps: int, project: bool, limit: float, lengths: np.ndarray, plink: np.ndarray,
+        plocal: np.ndarray, out: tuple[np.ndarray, ...],
+    ) -> tuple[int, int]:
+        """Control ticks in one compiled call, each observed (:func:`vjm_ros.core.pipeline.advance_ticks`).
+
+        As many ticks run as ``out`` has rows. ``evaluations`` counts the steps' stages and one
+        evaluation per sample, less the RK4 first stages taken from the sample before.
+
+        Returns
+        -------
+        done, code : int
+            Ticks that ran, and :data:`vjm_ros.core.pipeline.OK` or why tick ``done`` failed.
+        """
+        if method not in _FIXED_METHODS:
+            raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
+        done, code = pipeline.advance_ticks(
+            int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
+            bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal, out,
+            self._work, self._tick_state,
+        )
+        stages = 4 if method == K.RK4 else 1
+        reused = max(done - 1, 0) if method == K.RK4 else 0  # first stages taken from samples
+        self.evaluations += done * (stages * int(substeps) + 1) - reused
+        return int(done), int(code)
+
+
+_FIXED_METHODS = (K.EXPLICIT_EULER, K.SEMI_IMPLICIT_EULER, K.RK4, K.IMPLICIT_EULER)
+
+
+_LAST_READER: list = [None, None]
+"""The model and reader of the last :func:`forward_kinematics` call (reused for the same model)."""
+
+
+def forward_kinematics(model: Model, q: np.ndarray, qd: np.ndarray | None = None) -> Kinematics:
+    """Link frames (and rates, with ``qd``) of ``model`` at ``q``, from one kernel call.
+
+    A convenience for occasional reads (set-up, drawing, a controller's target); the reader of
+    the last model asked about is kept, so repeated calls on one model do not pack it again. Not
+    for concurrent use from several threads (keep a :meth:`Mechanism.reader` per thread).
+
+    Parameters
+    ----------
+    model : Model
+    q : ndarray, shape (n,)
+        Coordinates, rad or m.
+    qd : ndarray, shape (n,), optional
+        Rates; zero when omitted.
+
+    Returns
+    -------
+    Kinematics
+    """
+    if _LAST_READER[0] is not model:
+        _LAST_READER[:] = [model, Mechanism.reader(model)]
+    return _LAST_READER[1].kinematics(q, qd)
+
+
+def point_reader(model: Model, refs: list[PointRef]) -> Mechanism:
+    """A reader of the motion of points given in link frames, from the kernel's closure rows.
+
+    Each point ``P_i`` is tied to the world origin by a hinge row pair (zero gains: nothing
+    acts), so that ``terms(q, qd)[1]`` gives, in rows ``2 i`` and ``2 i + 1``: ``residual`` the
+    position (m), ``rate`` the velocity (m/s), ``bias`` ``Jdot qd`` (m/s^2) and ``jacobian``
+    ``dP/dq``, shape (2, n); the link frames are those of ``model``.
+
+    Parameters
+    ----------
+    model : Model
+    refs : list of PointRef
+        The points (``link = -1``: a world point, zero Jacobian).
+
+    Returns
+    -------
+    Mechanism
+    """
+    origin = PointRef(GROUND, (0.0, 0.0))
+    hinges = tuple(Closure(f"point{i}", HINGE, ref, origin) for i, ref in enumerate(refs))
+    probe = Model.build(model.name, model.chains, model.links, model.joints, hinges,
+                        gravity=tuple(model.gravity))
+    return Mechanism.reader(probe)

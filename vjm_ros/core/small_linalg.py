@@ -149,7 +149,7 @@ def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec, blocks,
     below), ``lambda`` is its plain solution by Cholesky (:func:`_solve_if_well_conditioned`).
     Otherwise ``A M^-1 A^T`` (symmetric positive semi-definite) is diagonalized by cyclic Jacobi rotations
     (its lower triangle is read, as LAPACK's ``dsyevd`` with ``UPLO='L'``); eigenvalues below
-    ``rcond * max eigenvalue`` count as zero, as in :func:`vjm_ros.core.constraints.solve_multipliers`,
+    ``rcond * max eigenvalue`` count as zero, as in the numpy oracle's ``solve_multipliers`` (``test/oracle/constraints.py``),
     so a rank-deficient ``A`` gets no multiplier along the directions it does not constrain.
 
     ``M`` is block-diagonal (``blocks``, one block per chain) and each closure row touches a

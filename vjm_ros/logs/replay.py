@@ -24,8 +24,8 @@ from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, 
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
 
-from vjm_ros.core.constraints import ClosureSet
-from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
+from vjm_ros.core.kinematics import link_segments, point_positions
+from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
 from vjm_ros.logs import rosbag2
 from vjm_ros.logs.mcap_recorder import BAG_METADATA, SCENE_ATTACHMENT, SETTINGS_METADATA
@@ -210,7 +210,7 @@ class _Poser:
 
     def __init__(self, model: Model):
         self.model = model
-        self.closures = ClosureSet(model)
+        self.mech = Mechanism.reader(model)
         self.point_links = np.array([p.ref.link for p in model.points], dtype=int)
         self.point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.index = {name: i for i, name in enumerate(model.joint_names)}
@@ -228,8 +228,8 @@ class _Poser:
                 qd[i] = js.velocity[j]
             if j < len(js.effort):
                 effort[i] = js.effort[j]
-        kin = forward_kinematics(model, q, qd)
-        terms = self.closures.evaluate(kin, jacobian=False)
+        dyn, terms = self.mech.terms(q, jacobian=False)  # one kernel call, no dynamics
+        kin = dyn.kin
         points = (
             point_positions(kin, self.point_links, self.point_local)
             if len(self.point_links)
@@ -244,7 +244,7 @@ class _Poser:
             theta=kin.theta[:n].copy(),
             points=points,
             closure_force=forces,
-            closure_error=self.closures.errors(terms),
+            closure_error=self.mech.closures.errors(terms),
             closure_points=terms.points,
             energy=energy,
             power_in=float(effort @ qd),

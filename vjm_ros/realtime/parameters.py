@@ -80,9 +80,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Penalty closure damping, N s/m (N m s/rad); negative: 0 when kp is given, else "
               "the scene's gains.", -1.0, 1e12, applies=RESET),
     ParamSpec("kernel", "auto",
-              "Physics implementation: 'auto' (compiled with numba when installed, else numpy), "
-              "'numba' or 'numpy' (the reference).",
-              choices=("auto", "numba", "numpy"), applies=RESET),
+              "Physics kernels: 'auto' (machine code with numba, plain Python without) or "
+              "'numba' (an error without numba).",
+              choices=("auto", "numba"), applies=RESET),
     ParamSpec("realtime", True,
               "Pace ticks to the wall clock (late and missed ticks are counted); false: run "
               "as fast as possible."),

@@ -48,7 +48,7 @@ from std_msgs.msg import Float64MultiArray
 
 from vjm_ros.core.compiled import make_mechanism
 from vjm_ros.core.constraints import ExactClosure
-from vjm_ros.core.kinematics import forward_kinematics
+from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import HINGE, Model
 from vjm_ros.ros.controller_base import ControllerNode
 from vjm_ros.ros.conversions import joint_arrays, seconds

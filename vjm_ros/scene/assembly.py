@@ -9,9 +9,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from vjm_ros.core.constraints import ClosureSet
-from vjm_ros.core.kinematics import forward_kinematics
 from vjm_ros.core.model import Model
+
+
+def _reader(model: Model):
+    """The compiled mechanism that reads closure rows (imported here: loading the kernels is
+    paid by the scenes that need them)."""
+    from vjm_ros.core.mechanism import Mechanism
+
+    return Mechanism.reader(model)
 
 
 def closure_residual(model: Model, q: np.ndarray) -> np.ndarray:
@@ -21,7 +27,7 @@ def closure_residual(model: Model, q: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (r,)
     """
-    return ClosureSet(model).evaluate(forward_kinematics(model, q), jacobian=False).residual
+    return _reader(model).terms(q, jacobian=False)[1].residual
 
 
 def assemble(
@@ -59,14 +65,14 @@ def assemble(
     numpy.linalg.LinAlgError
         If a least-squares step fails (only for non-finite or absurdly scaled input).
     """
-    closures = ClosureSet(model)
     q, qd = model.initial_state()
-    if closures.n_rows == 0:
+    if model.n_rows == 0:
         return q, qd, 0.0
+    mech = _reader(model)
     free = np.setdiff1d(np.arange(model.n), np.asarray(fixed, dtype=int))
 
     def evaluate(qq):
-        return closures.evaluate(forward_kinematics(model, qq, np.zeros(model.n)))
+        return mech.terms(qq)[1]
 
     terms = evaluate(q)
     err = float(np.max(np.abs(terms.residual)))
@@ -83,7 +89,7 @@ def assemble(
             trial = q.copy()
             trial[free] += scale * step
             # Trials need only the residual; the Jacobian is formed for the accepted one.
-            t_res = closures.evaluate(forward_kinematics(model, trial), jacobian=False).residual
+            t_res = mech.terms(trial, jacobian=False)[1].residual
             evaluations += 1
             t_err = float(np.max(np.abs(t_res)))
             if np.isfinite(t_err) and t_err < err:
@@ -92,7 +98,7 @@ def assemble(
             scale *= 0.5
         else:
             break
-    terms = closures.evaluate(forward_kinematics(model, q, qd))
+    terms = mech.terms(q, qd)[1]
     if free.size:
         a = terms.jacobian[:, free]
         qd = qd.copy()

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vjm_ros.core.dynamics import mass_matrix
 from vjm_ros.core.errors import SceneError
 from vjm_ros.core.model import (
     CLOSURE_KINDS,
@@ -505,7 +504,7 @@ class SceneBuilder:
         """Refuse a singular mass matrix, naming the link whose joint has no inertia."""
         q, _ = model.initial_state()
         with np.errstate(all="ignore"):
-            m = mass_matrix(model, q)
+            m = _mass_matrix(model, q)
             ok = bool(np.all(np.isfinite(m)))
             ev = np.linalg.eigvalsh(m) if ok else np.array([np.nan])
         if ok and ev[0] > 1e-12 * max(float(ev[-1]), 1e-300):
@@ -554,3 +553,11 @@ class SceneBuilder:
                 f"residual {size:.3g} at '{model.closures[k].name}' after assembly",
             )
         return model.with_state(q, qd), err
+
+
+def _mass_matrix(model: Model, q: np.ndarray) -> np.ndarray:
+    """``M(q)``, shape (n, n), from the compiled kernel (imported here: only scenes that are
+    checked load it)."""
+    from vjm_ros.core.mechanism import Mechanism
+
+    return Mechanism.reader(model).mass_matrix(q)

@@ -19,6 +19,9 @@ import numpy as np
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.core.integrators import make_integrator
 
+KERNELS = ("auto", "numba")
+"""Accepted values of :attr:`SimulationSettings.kernel`."""
+
 
 @dataclass(frozen=True)
 class SimulationSettings:
@@ -46,8 +49,9 @@ class SimulationSettings:
     rtol, atol : float
         Tolerances of adaptive integrators.
     kernel : str
-        ``"auto"`` (compiled when numba is installed, else numpy), ``"numba"`` (compiled; an
-        error without numba) or ``"numpy"`` (the reference implementation).
+        ``"auto"`` (the compiled kernels: machine code with numba, plain Python without it) or
+        ``"numba"`` (the same, an error without numba). The former ``"numpy"`` formulation is
+        refused with a message naming these two.
     check_stiffness : bool
         Refuse penalty gains beyond the integrator's stability bound before running (judged on
         the coupled closure modes at the initial pose, see :attr:`Simulator.stiffness_report`).
@@ -92,9 +96,14 @@ class SimulationSettings:
             v = getattr(self, key)
             if v is not None and not (np.isfinite(v) and v >= 0):
                 raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
-        if self.kernel not in ("auto", "numba", "numpy"):
+        if self.kernel == "numpy":
             raise ConfigurationError(
-                f"kernel: expected 'auto', 'numba' or 'numpy', found {self.kernel!r}"
+                "kernel: 'numpy' is no longer a choice (the physics runs only in the compiled "
+                "kernels, as plain Python where numba is missing); use 'auto' or 'numba'"
+            )
+        if self.kernel not in KERNELS:
+            raise ConfigurationError(
+                f"kernel: expected 'auto' or 'numba', found {self.kernel!r}"
             )
         if self.kernel == "numba" and importlib.util.find_spec("numba") is None:
             raise ConfigurationError("kernel: 'numba' needs the numba package")

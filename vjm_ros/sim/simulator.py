@@ -15,8 +15,7 @@ from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
-from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
-from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.model import Model
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
@@ -163,16 +162,13 @@ class Simulator:
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = closure_method(model, self.settings, self.scene_gains,
                                      self._initial_mobility)
-        if self.settings.kernel == "numpy":
-            self.mechanism = Mechanism(model, self.method)
-        else:
-            from vjm_ros.core.compiled import (  # numba is imported only here
-                fuse_integrator,
-                make_mechanism,
-            )
+        from vjm_ros.core.compiled import (  # numba is imported only here
+            fuse_integrator,
+            make_mechanism,
+        )
 
-            self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
-            self.integrator = fuse_integrator(self.integrator, self.mechanism)
+        self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
+        self.integrator = fuse_integrator(self.integrator, self.mechanism)
         self.stiffness_report, radius = [], None
         if isinstance(self.method, PenaltyClosure) and model.n_rows:
             self.stiffness_report, radius = closure_modes(
@@ -359,13 +355,7 @@ class Simulator:
                 self.t, "the state is no longer finite", self._worst_closure(), self._likely_cause()
             )
         if self.model.n_rows and self.divergence_limit:
-            if hasattr(self.mechanism, "closure_errors"):
-                err = self.mechanism.closure_errors(self.q)
-            else:
-                terms = self.mechanism.closures.evaluate(
-                    forward_kinematics(self.model, self.q), jacobian=False
-                )
-                err = self.mechanism.closures.errors(terms)
+            err = self.mechanism.closure_errors(self.q)
             worst = int(np.argmax(err))
             if err[worst] > self.divergence_limit:
                 raise DivergenceError(
@@ -380,8 +370,7 @@ class Simulator:
         if not self.model.n_rows or not self._history:
             return None
         _, q, _ = self._history[-1]
-        terms = self.mechanism.closures.evaluate(forward_kinematics(self.model, q), jacobian=False)
-        return self.model.closures[int(np.argmax(self.mechanism.closures.errors(terms)))].name
+        return self.model.closures[int(np.argmax(self.mechanism.closure_errors(q)))].name
 
     def _likely_cause(self) -> str:
         """Name the likely cause of a divergence, judged at the last good state."""
@@ -436,11 +425,7 @@ class Simulator:
         """Singular values of the closure Jacobian at ``q``, largest first (empty if none)."""
         if not self.model.n_rows or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
             return np.zeros(0)
-        try:  # one kernel call where the kernel is compiled
-            jacobian = self.mechanism.closure_jacobian(q)
-        except np.linalg.LinAlgError:  # a singular mass matrix: the Jacobian from kinematics
-            jacobian = self.mechanism.closures.evaluate(
-                forward_kinematics(self.model, q, qd)).jacobian
+        jacobian = self.mechanism.closure_jacobian(q)  # one kernel call, whatever M is
         return np.linalg.svd(jacobian, compute_uv=False)
 
     # ------------------------------------------------------------------ outputs
@@ -469,7 +454,8 @@ class Simulator:
                       if model.points else np.zeros((0, 2)))
             segments = link_segments(model, kin)
         energy = mech.energies(ev, self.qd)
-        dissipation = mech.method.dissipation(ev.closure) if mech.is_penalty else 0.0
+        # sum Kv Cdot^2: the power drawn by the penalty dampers (as pipeline.observe sums it)
+        dissipation = float(np.sum(mech.method.kv * ev.closure.rate**2)) if mech.is_penalty else 0.0
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
@@ -502,7 +488,7 @@ class Simulator:
             "substeps": s.substeps,
             "dt": self.dt,
             "h": self.h,
-            "kernel": getattr(self.mechanism, "kernel", "numpy"),
+            "kernel": self.mechanism.kernel,
         }
         if isinstance(self.method, PenaltyClosure):
             out["kp"] = self.method.kp.tolist()

@@ -53,8 +53,8 @@ def mobility_at(model: Model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     ndarray, shape (r, r)
         1/kg for point rows, 1/(kg m^2) for angle rows.
     """
-    ev = Mechanism(model, ExactClosure()).evaluate(q, qd, np.zeros(model.n))
-    return closure_mobility(ev.dyn.mass_matrix, ev.closure.jacobian)
+    dyn, closure = Mechanism(model, ExactClosure(), warm_up=False).terms(q, qd)
+    return closure_mobility(dyn.mass_matrix, closure.jacobian)
 
 
 def effective_masses(mobility: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from types import ModuleType
 import numpy as np
 
 from vjm_ros.core.errors import DivergenceError
-from vjm_ros.core.kinematics import forward_kinematics
+from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import GROUND, HINGE, REVOLUTE, Model
 
 MUJOCO_REQUIREMENT = "mujoco>=3.2,!=4.0.0"

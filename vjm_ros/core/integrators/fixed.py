@@ -1,5 +1,11 @@
 """Fixed-step methods for the live node.
 
+Each class's ``step`` defines its method on any system with ``accelerations``: the stability
+analysis (:mod:`vjm_ros.core.integrators.base`) applies it to linear test systems. A
+:class:`~vjm_ros.core.mechanism.Mechanism` is advanced by the same method inside the compiled
+kernel (:func:`vjm_ros.core.compiled.fuse_integrator`, :func:`vjm_ros.core.kernels.step`), which
+the test suite checks against these steps on the numpy oracle.
+
 * ``explicit_euler``: ``q+ = q + h v``, ``v+ = v + h a(q, v)`` (baseline, order 1);
 * ``semi_implicit_euler``: ``v+ = v + h a(q, v)``, ``q+ = q + h v+`` (symplectic, order 1);
 * ``rk4``: the classical Runge-Kutta method, written as its Butcher table (order 4);

@@ -24,7 +24,7 @@ HORIZONS: dict[str, float] = {
 
 The non-chaotic scenes could be compared for longer; these horizons keep the full grid (about
 150 rows per scene, each timed three times) within about ten minutes of one core with the
-compiled kernel (about an hour with the numpy one).
+compiled kernels.
 """
 QUICK_HORIZON = 0.5
 """Largest horizon of ``--quick``, s."""

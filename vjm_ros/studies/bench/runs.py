@@ -14,7 +14,8 @@ from vjm_ros.core.errors import (
     StiffnessError,
     VjmError,
 )
-from vjm_ros.core.kinematics import forward_kinematics, link_segments, point_positions
+from vjm_ros.core.kinematics import link_segments, point_positions
+from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.scene.loader import Scene
 from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
 from vjm_ros.sim.trajectory import Trajectory

@@ -6,7 +6,6 @@ import math
 import statistics
 import time
 from collections.abc import Sequence
-from dataclasses import fields
 
 import numpy as np
 
@@ -164,25 +163,16 @@ def _slope(ns: Sequence[float], costs: Sequence[float]) -> float | None:
 
 
 def _scaling_methods(extra: dict) -> list[tuple[str, str, dict]]:
-    """(key, integrator, settings) of the scaling study; the numpy kernel too, when selectable."""
-    out = []
-    kernels = [None]
-    if "kernel" in {f.name for f in fields(SimulationSettings)} and "kernel" not in extra:
-        kernels.append("numpy")
-    for kernel in kernels:
-        for integ, settings in SCALING_METHODS:
-            key = f"{integ} {settings['closure']}" + (f" [{kernel} kernel]" if kernel else "")
-            st = {**settings, **extra, **({"kernel": kernel} if kernel else {})}
-            out.append((key, integ, st))
-    return out
+    """(key, integrator, settings) of the scaling study, on the compiled kernels."""
+    return [(f"{integ} {settings['closure']}", integ, {**settings, **extra})
+            for integ, settings in SCALING_METHODS]
 
 
 def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
                 extra: dict | None = None) -> dict:
     """Cost per tick against chain length and number of chains.
 
-    Each method of :data:`SCALING_METHODS` is timed with the default physics kernel and, when
-    :class:`SimulationSettings` has a ``kernel`` field, also with the numpy reference kernel.
+    Each method of :data:`SCALING_METHODS` is timed on the compiled kernels.
 
     Returns
     -------

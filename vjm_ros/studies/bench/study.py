@@ -103,13 +103,13 @@ def _plan(opts: BenchOptions, grid, scenes: list, use_mujoco: bool) -> tuple[lis
 
 
 def _kernel_name(scenes: list, opts: BenchOptions) -> str | None:
-    """The kernel the rows run on (``numba`` or ``numpy``), from a probe simulator."""
+    """The kernel the rows run on (``numba``), from a probe simulator."""
     if not scenes:
         return None
     try:
         probe = Simulator(scenes[0].model, SimulationSettings(
             integrator="rk4", closure="exact", **opts.extra), scenes[0].gains)
-        return probe.describe().get("kernel", "numpy")
+        return probe.describe().get("kernel")
     except (VjmError, TypeError):
         return None
 

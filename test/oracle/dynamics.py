@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vjm_ros.core.kinematics import Kinematics, forward_kinematics, point_jacobians, point_motion
+from oracle.kinematics import Kinematics, forward_kinematics, point_jacobians, point_motion
 from vjm_ros.core.model import Model
 
 
