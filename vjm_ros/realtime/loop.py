@@ -204,6 +204,9 @@ class TickLoop:
         self._gate_opened = -math.inf
         self._block: SampleBlock | None = None
         self._block_for: Simulator | None = None
+        self.ticking_since: tuple[float, float] | None = None
+        """Wall time (of ``clock``) and process CPU time (s) when the ticks began: at the start of
+        :meth:`run`, or when the first command ended a ``wait_for_command`` hold."""
 
     @property
     def recorders(self) -> list:
@@ -309,6 +312,8 @@ class TickLoop:
             self.sim.blocks_compiled()  # the compiled tick is loaded before the first deadline
             self._emit(self.sim.sample(singular_values=True))
             self._holding = self.options.wait_for_command
+            if not self._holding:
+                self._mark_start()
             self._next_diagnostics = self._clock() + self.options.diagnostics_period
             while not self._stop:
                 self._serve_requests()
@@ -346,11 +351,16 @@ class TickLoop:
         if self.commands.wait_fresh(HOLD_REPUBLISH):
             self._holding = False
             self.pacer.restart()
+            self._mark_start()
             self.outputs.notice("started", f"first command: running from t = {self.time:.6g} s")
             return
         sim = self.sim
         self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
         self._periodic()
+
+    def _mark_start(self) -> None:
+        if self.ticking_since is None:
+            self.ticking_since = (self._clock(), time.process_time())
 
     def _duration_reached(self) -> bool:
         d = self.options.duration

@@ -429,9 +429,16 @@ class SimNode(Node):
             self.loop.logs.active.remove(rec)
 
     def summary(self, reason: str, wall: float, cpu: float) -> dict:
-        """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s."""
+        """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s.
+
+        ``ticking_wall_time`` and ``ticking_cpu_time`` (s) count from the first tick on (after a
+        ``wait_for_command`` hold), the figures a per-tick cost is taken from.
+        """
         loop = self.loop
         stats = loop.pacer.stats
+        since = loop.ticking_since
+        ticking = ((time.perf_counter() - since[0], time.process_time() - since[1])
+                   if since is not None else (0.0, 0.0))
         return {
             "scene": self.scene.name,
             "reason": reason,
@@ -439,6 +446,8 @@ class SimNode(Node):
             "ticks": loop.sim.ticks,
             "wall_time": wall,
             "cpu_time": cpu,
+            "ticking_wall_time": ticking[0],
+            "ticking_cpu_time": ticking[1],
             "realtime_factor": loop.sim.t / wall if wall > 0 else None,
             "realtime": loop.options.realtime,
             "lockstep": loop.options.lockstep,
