@@ -26,7 +26,7 @@ topic                           type                                      when
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
 ==============================  ========================================  =========================
 
-Message layouts: :mod:`vjm_ros.ros.conversions`. Header stamps are simulated time, which only
+Message layouts: :mod:`vjm_ros.ros.conversions` (the per-tick ones published as serialized bytes, :mod:`vjm_ros.ros.wire`). Header stamps are simulated time, which only
 increases (also across ``~/reset``); the node itself runs on the wall clock (it publishes
 ``/clock`` but does not use it). Services: ``~/pause``
 (``std_srvs/SetBool``), ``~/step`` (``std_srvs/Trigger``, one tick while paused), ``~/reset``
@@ -95,6 +95,7 @@ from vjm_ros.realtime.parameters import (
 )
 from vjm_ros.ros import conversions as conv
 from vjm_ros.ros.runtime import Spinner, StopOnSignals, raise_priority
+from vjm_ros.ros.wire import TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.simulator import Sample, Simulator
@@ -291,7 +292,7 @@ class SimNode(Node):
                 self._wrench_pubs[name] = self.create_publisher(
                     WrenchStamped, conv.wrench_topic(name), 10)
         self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
-        self._messages = conv.TickMessages(self._joint_names, self._closure_names)
+        self._wire = TickWire(self._joint_names, self._closure_names)
         self._trace = conv.TipTrace(len(model.chains))
 
     # ------------------------------------------------------------------ outputs (loop thread)
@@ -309,20 +310,20 @@ class SimNode(Node):
 
     def clock(self, t: float) -> None:
         """Publish ``/clock``."""
-        self._clock_pub.publish(self._messages.fill_clock(t))
+        self._clock_pub.publish(self._wire.clock_at(t))
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
-        self._joint_pub.publish(self._messages.fill_joint_state(t, q, qd, effort))
+        self._joint_pub.publish(self._wire.joint_state(t, q, qd, effort))
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
         forces = sample.closure_force
-        messages = self._messages
-        self._forces_pub.publish(messages.fill_constraint_forces(forces))
-        for i, (pub, force) in enumerate(zip(self._wrench_list, forces, strict=True)):
-            pub.publish(messages.fill_wrench(i, force, t))
-        self._energy_pub.publish(messages.fill_energy(sample.energy))
+        wire = self._wire
+        self._forces_pub.publish(wire.constraint_forces(forces))
+        for i, pub in enumerate(self._wrench_list):
+            pub.publish(wire.wrench(i, forces[i], t))
+        self._energy_pub.publish(wire.energy_values(sample.energy))
 
     def markers(self, sample: Sample, t: float) -> None:
         """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
