@@ -5,8 +5,10 @@ One tick (:meth:`TickLoop.run`):
 1. wait: realtime mode waits for the tick's wall-clock deadline (:class:`~.pacing.Pacer`), fast
    mode does not wait, lockstep mode waits for a command received since the previous tick (or
    ``lockstep_timeout``, counted);
-2. latch the efforts (:meth:`~.commands.CommandBuffer.latch`): a command received while the
-   previous tick ran applies from this tick on, and it is held over the whole tick;
+2. take the commands that arrived since the previous tick (:attr:`TickLoop.poll_inputs`, while
+   ticking freely) and latch the efforts (:meth:`~.commands.CommandBuffer.latch`): a command
+   received while the previous tick ran applies from this tick on, and it is held over the
+   whole tick;
 3. advance the simulator by one tick;
 4. outputs: ``/clock`` every tick; joint states every ``publish_every`` ticks (from the state
    itself, cheap); constraint forces, wrenches and energy every ``forces_every`` ticks (these need
@@ -234,9 +236,19 @@ class TickLoop:
         self._block: SampleBlock | None = None
         self._block_for: Simulator | None = None
         self._row: RowSample | None = None
+        self.poll_inputs: Callable[[], None] | None = None
+        """Called at the start of every tick while :attr:`polls_inputs` (the node takes the
+        commands that arrived since the previous tick)."""
         self.ticking_since: tuple[float, float] | None = None
         """Wall time (of ``clock``) and process CPU time (s) when the ticks began: at the start of
         :meth:`run`, or when the first command ended a ``wait_for_command`` hold."""
+
+    @property
+    def polls_inputs(self) -> bool:
+        """Whether the loop takes its inputs itself (:attr:`poll_inputs`) at each tick: while it
+        ticks freely; not while paused, holding for the first command or in lockstep (then it
+        waits for commands, which the executor's callbacks deliver)."""
+        return not (self._paused or self._holding or self.options.lockstep)
 
     @property
     def recorders(self) -> list:
@@ -443,6 +455,8 @@ class TickLoop:
         )
 
     def _tick(self) -> None:
+        if self.poll_inputs is not None and self.polls_inputs:
+            self.poll_inputs()
         latched = self.commands.latch()
         if latched.timed_out:
             self.outputs.notice(

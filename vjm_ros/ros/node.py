@@ -37,7 +37,10 @@ A controller that starts with the simulator should be paired with ``-p wait_for_
 ``lockstep`` (every tick waits for its command).
 
 Threads: the tick loop (:class:`~vjm_ros.realtime.loop.TickLoop`) owns the main thread; a background
-thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the subscriptions and services.
+thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the services and parameters.
+The tick loop takes the commands itself at the start of each tick while it ticks freely; while
+paused, holding for the first command or in lockstep, the executor delivers them
+(:class:`~vjm_ros.ros.runtime.PolledGroup`).
 
 Exit codes:
 
@@ -94,7 +97,7 @@ from vjm_ros.realtime.parameters import (
     ticks_between,
 )
 from vjm_ros.ros import conversions as conv
-from vjm_ros.ros.runtime import Spinner, StopOnSignals, raise_priority
+from vjm_ros.ros.runtime import PolledGroup, Spinner, StopOnSignals, raise_priority, take_all
 from vjm_ros.ros.wire import TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
@@ -203,8 +206,14 @@ class SimNode(Node):
         self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
                              recorders, paused=self.config.start_paused)
         self._publish_scene()
-        self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts, 10)
-        self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands, 10)
+        polled = PolledGroup(lambda: self.loop.polls_inputs)
+        self._polled = [
+            (self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts,
+                                      10, callback_group=polled), self._on_efforts),
+            (self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands,
+                                      10, callback_group=polled), self._on_joint_commands),
+        ]
+        self.loop.poll_inputs = self._poll_commands
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -354,13 +363,18 @@ class SimNode(Node):
         suffix = f" ({held} more suppressed in the last {WARNING_PERIOD:g} s)" if held else ""
         self.get_logger().warning(text + suffix)
 
-    # ------------------------------------------------------------------ inputs (executor thread)
+    # ------------------------------------------------------------------ inputs (tick loop or executor thread)
     def _on_efforts(self, msg: Float64MultiArray) -> None:
         self._judge("~/effort_commands", self.loop.commands.submit_array(conv.efforts_of(msg)))
 
     def _on_joint_commands(self, msg: JointState) -> None:
         names, efforts = conv.named_efforts(msg)
         self._judge("~/joint_commands", self.loop.commands.submit_named(names, efforts))
+
+    def _poll_commands(self) -> None:
+        """Run the command handlers on what arrived since the previous tick (loop thread)."""
+        for handler, msg in take_all(self._polled):
+            handler(msg)
 
     def _judge(self, topic: str, verdict: Verdict) -> None:
         if not verdict.accepted:
