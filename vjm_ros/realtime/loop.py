@@ -55,7 +55,12 @@ GATE_OPEN_SHARE = 0.6
 lets a callback that started late finish before the tick is due."""
 GATE_MIN_OPEN = 1e-4
 """Shortest time the executor's gate stays open between two ticks, s: when the loop runs behind
-and catches up, ROS callbacks (the commands) still get a turn at every tick."""
+and catches up, ROS callbacks (the commands) still get a turn at every tick (once per
+:data:`SERVICE_TURN` when the loop takes the commands itself)."""
+SERVICE_TURN = 0.01
+"""While the loop takes the commands itself (:attr:`TickLoop.poll_inputs`), the longest the
+executor goes without its minimal turn when the loop runs behind, wall s: services and parameter
+changes still get through within it, and catch-up ticks do not each wait ``GATE_MIN_OPEN``."""
 SIGMA_PERIOD = 0.01
 """Simulated seconds between two evaluations of the closure Jacobian's smallest singular value
 (for ``/diagnostics``): an SVD per tick would cost a fifth of a tick's CPU for a figure reported
@@ -233,6 +238,7 @@ class TickLoop:
         """When ROS callbacks may run: closed from just before a realtime tick's deadline until
         its outputs are out (:class:`~.gate.Gate`)."""
         self._gate_opened = -math.inf
+        self._last_turn = -math.inf
         self._block: SampleBlock | None = None
         self._block_for: Simulator | None = None
         self._row: RowSample | None = None
@@ -441,11 +447,21 @@ class TickLoop:
             self.gate.open(max(now + GATE_OPEN_SHARE * (due - now), now + GATE_MIN_OPEN))
 
     def _close_gate(self) -> None:
-        """Stop ROS callbacks for the tick, after their minimal turn since the previous one."""
-        left = GATE_MIN_OPEN - (self._clock() - self._gate_opened)
+        """Stop ROS callbacks for the tick, after their minimal turn since the previous one;
+        while the loop takes the commands itself, after one turn per :data:`SERVICE_TURN`."""
+        now = self._clock()
+        left = GATE_MIN_OPEN - (now - self._gate_opened)
         if left > 0:
+            if self._polling() and now - self._last_turn < SERVICE_TURN:
+                self.gate.close()  # behind schedule: catch up; the services had a turn lately
+                return
             self._sleep(left)
+            now = self._clock()
+        self._last_turn = now
         self.gate.close()
+
+    def _polling(self) -> bool:
+        return self.poll_inputs is not None and self.polls_inputs
 
     def _interrupted(self) -> bool:
         return (
@@ -455,7 +471,7 @@ class TickLoop:
         )
 
     def _tick(self) -> None:
-        if self.poll_inputs is not None and self.polls_inputs:
+        if self._polling():
             self.poll_inputs()
         latched = self.commands.latch()
         if latched.timed_out:
