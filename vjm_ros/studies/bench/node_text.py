@@ -17,9 +17,9 @@ def node_text() -> list[str]:
         "Measured with `python -m vjm_ros.studies.node_cost` (fast mode, 5 simulated s at 1 kHz, "
         "one subscriber process on every topic) and `python -m vjm_ros.studies.live_loop` "
         "(realtime at 1 kHz, normal priority, 10 s, a 1 kHz controller process that subscribes "
-        "to every topic and answers each joint state), on this 2-core machine while other jobs "
-        "kept its load average at 3.5-6; *before* is the node without the changes listed below, "
-        "run alternately with *after* in the same sitting (3 runs of each study).",
+        "to every topic and answers each joint state) on this 2-core machine while other jobs "
+        "ran on it; *before* is the node without the changes listed here, run alternately with "
+        "*after*, 3 runs of each (node_cost at load average 3.7-6.0, live_loop at 2.2-4.8).",
         "",
         "- **CPU per tick against its floor** (node / (physics + bare rclpy publishing of the "
         "same messages), target at most 1.3): after 1.20-1.79 on four_bar, 1.28-1.60 on "
@@ -35,13 +35,14 @@ def node_text() -> list[str]:
         "between ticks: the bare-publish floor is a lower bound the node cannot reach.",
         "- **Live, 1 kHz controller in the loop** (four_bar, six_bar, double_slider, five_bar, "
         "three_chain; targets: at most 0.1 % missed ticks, median command lag at most 2 ticks, "
-        "at least 95 % of commands applied): after 3.6-92 % missed ticks (median of the 15 "
-        "scene runs 20 %), median lag 1-2 ticks (p99 2-99), 78-96 % applied; before 22-84 % "
-        "missed (median 50 %), median lag 1-24 ticks, 70-93 % applied. At this load the missed-tick target is out of reach: the two cores carry the "
-        "other jobs, the controller's executor (7 topics at 1 kHz) and the node; a missed tick "
-        "is the tick thread waiting for a core. The node's executor thread spent 238 µs per "
-        "command before (a quarter of a core at 1 kHz) and 10 µs after (the tick loop takes the "
-        "commands itself); the tick thread's ~260 µs per tick is mostly the spin to the "
-        "deadline (the last 0.2 ms before it).",
+        "at least 95 % of commands applied): after 0.10-9.7 % missed ticks (median of the 15 "
+        "scene runs 4.9 %), median lag 1 tick in every run (p99 1-9), 76-99.5 % applied; before "
+        "0.19-74 % missed (median 13.5 %), median lag 1-62 ticks (p99 1-482), 55-99 % "
+        "applied. Only one scene run met the missed-tick target (double_slider, 0.10 %): a "
+        "missed tick is the tick thread waiting for a core, and the two cores carry the other "
+        "jobs, the controller's executor (7 topics at 1 kHz) and the node. The node's executor "
+        "thread spent 238 µs per command before (a quarter of a core at 1 kHz) and 10 µs after "
+        "(the tick loop takes the commands itself); the tick thread's ~260 µs per tick is "
+        "mostly the spin to the deadline (the last 0.2 ms before it).",
         "",
     ]
