@@ -19,7 +19,6 @@ from vjm_ros.studies.bench.grid import (
     THESIS,
     TIERS,
 )
-from vjm_ros.studies.bench.node_text import node_text
 from vjm_ros.studies.bench.report import (
     _e,
     _front_table,
@@ -113,7 +112,6 @@ def render_docs(results: dict, rows: dict[str, list[RowResult]]) -> str:
               for ln in sc]
         lines += sc
     lines += _long_runs_text(results.get("long_runs", []))
-    lines += node_text()
     lines += _extremes_text()
     return "\n".join(lines) + "\n"
 
