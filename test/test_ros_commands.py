@@ -21,6 +21,7 @@ from vjm_ros.realtime.loop import (
     DURATION,
     GATE_MIN_OPEN,
     GATE_OPEN_SHARE,
+    SERVICE_TURN,
     STOPPED,
     LoopOptions,
     TickLoop,
@@ -664,6 +665,34 @@ def test_ros_callbacks_are_gated_out_of_realtime_ticks_but_get_a_turn_when_behin
     turns = [dt for dt in clock.sleeps if dt == pytest.approx(GATE_MIN_OPEN, abs=1e-6)]
     assert len(turns) >= 10
     assert loop.pacer.stats.missed > 0
+
+
+def test_a_loop_that_takes_its_commands_catches_up_without_a_turn_per_tick():
+    """Taking the commands itself, the loop behind schedule gives the executor (services) its
+    GATE_MIN_OPEN turn once per SERVICE_TURN instead of before every catch-up tick, and takes
+    the inputs at every tick."""
+    clock = CoarseClock()
+    out = Collect()
+    sim = four_bar(1000.0)
+    commands = CommandBuffer(sim.model.actuator_names, sim.model.joint_names, sim.limits, 0.0)
+    polls = []
+
+    def slow_tick(t):
+        clock.t += 0.0015 if 0.01 < t < 0.04 else 0.0002  # thirty ticks longer than a period
+
+    out.on_joints = slow_tick
+    loop = TickLoop(sim, commands, out, LoopOptions(realtime=True, marker_period=0.0,
+                                                    duration=0.06),
+                    clock=clock, sleep=clock.sleep)
+    loop.poll_inputs = lambda: polls.append(clock.t)
+    loop.pacer._yield = lambda: setattr(clock, "t", clock.t + 1e-5)  # spinning takes time
+    assert loop.run() == DURATION
+    assert len(polls) == sim.ticks == 60
+    turns = [dt for dt in clock.sleeps if dt == pytest.approx(GATE_MIN_OPEN, abs=1e-6)]
+    # behind for about 45 ms of wall time (30 ticks of 1.5 ms): one turn per SERVICE_TURN, not
+    # one per tick (the loop without polled inputs sleeps before each, test above)
+    assert loop.pacer.stats.missed >= 10
+    assert 1 <= len(turns) <= math.ceil(0.045 / SERVICE_TURN) + 1, len(turns)
 
 
 def test_gate_lets_callbacks_start_only_until_its_closing_time():

@@ -129,6 +129,7 @@ class CommandBuffer:
         self._stamp = 0.0
         self._active = False
         self._fresh = False
+        self._unchanged: Latched | None = None
         self.accepted = 0
         self.rejected = 0
         self.clamped = 0
@@ -251,7 +252,15 @@ class CommandBuffer:
                 self._active = False
                 self.timeouts += 1
                 timed_out = True
-            return Latched(self._efforts.copy(), fresh, timed_out)
+            if fresh or timed_out:
+                return Latched(self._efforts.copy(), fresh, timed_out)
+            # nothing new (most ticks): the previous such answer, a read-only view (every
+            # change replaces self._efforts, none writes into it)
+            if self._unchanged is None or self._unchanged.efforts.base is not self._efforts:
+                view = self._efforts.view()
+                view.flags.writeable = False
+                self._unchanged = Latched(view, False, False)
+            return self._unchanged
 
     def wait_fresh(self, timeout: float) -> bool:
         """Block until a valid command arrives that the next latch has not seen yet.

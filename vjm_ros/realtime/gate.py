@@ -40,6 +40,8 @@ class Gate:
 
     def open(self, until: float = math.inf) -> None:
         """Let callbacks start until the time ``until`` (of ``clock``, s)."""
+        if self._open and self._until == until:
+            return  # nothing changes (fast mode opens it after every tick); only this thread sets it
         with self._cv:
             self._open = True
             self._until = until

@@ -5,8 +5,10 @@ One tick (:meth:`TickLoop.run`):
 1. wait: realtime mode waits for the tick's wall-clock deadline (:class:`~.pacing.Pacer`), fast
    mode does not wait, lockstep mode waits for a command received since the previous tick (or
    ``lockstep_timeout``, counted);
-2. latch the efforts (:meth:`~.commands.CommandBuffer.latch`): a command received while the
-   previous tick ran applies from this tick on, and it is held over the whole tick;
+2. take the commands that arrived since the previous tick (:attr:`TickLoop.poll_inputs`, while
+   ticking freely) and latch the efforts (:meth:`~.commands.CommandBuffer.latch`): a command
+   received while the previous tick ran applies from this tick on, and it is held over the
+   whole tick;
 3. advance the simulator by one tick;
 4. outputs: ``/clock`` every tick; joint states every ``publish_every`` ticks (from the state
    itself, cheap); constraint forces, wrenches and energy every ``forces_every`` ticks (these need
@@ -44,6 +46,7 @@ from vjm_ros.realtime.commands import CommandBuffer
 from vjm_ros.realtime.gate import Gate
 from vjm_ros.realtime.monitor import Monitor
 from vjm_ros.realtime.pacing import Pacer
+from vjm_ros.realtime.row_sample import RowSample
 from vjm_ros.sim.simulator import Sample, SampleBlock, Simulator
 
 WAIT_SLICE = 0.05
@@ -53,7 +56,12 @@ GATE_OPEN_SHARE = 0.6
 lets a callback that started late finish before the tick is due."""
 GATE_MIN_OPEN = 1e-4
 """Shortest time the executor's gate stays open between two ticks, s: when the loop runs behind
-and catches up, ROS callbacks (the commands) still get a turn at every tick."""
+and catches up, ROS callbacks (the commands) still get a turn at every tick (once per
+:data:`SERVICE_TURN` when the loop takes the commands itself)."""
+SERVICE_TURN = 0.01
+"""While the loop takes the commands itself (:attr:`TickLoop.poll_inputs`), the longest the
+executor goes without its minimal turn when the loop runs behind, wall s: services and parameter
+changes still get through within it, and catch-up ticks do not each wait ``GATE_MIN_OPEN``."""
 SIGMA_PERIOD = 0.01
 """Simulated seconds between two evaluations of the closure Jacobian's smallest singular value
 (for ``/diagnostics``): an SVD per tick would cost a fifth of a tick's CPU for a figure reported
@@ -202,8 +210,23 @@ class TickLoop:
         """When ROS callbacks may run: closed from just before a realtime tick's deadline until
         its outputs are out (:class:`~.gate.Gate`)."""
         self._gate_opened = -math.inf
+        self._last_turn = -math.inf
         self._block: SampleBlock | None = None
         self._block_for: Simulator | None = None
+        self._row: RowSample | None = None
+        self.poll_inputs: Callable[[], None] | None = None
+        """Called at the start of every tick while :attr:`polls_inputs` (the node takes the
+        commands that arrived since the previous tick)."""
+        self.ticking_since: tuple[float, float] | None = None
+        """Wall time (of ``clock``) and process CPU time (s) when the ticks began: at the start of
+        :meth:`run`, or when the first command ended a ``wait_for_command`` hold."""
+
+    @property
+    def polls_inputs(self) -> bool:
+        """Whether the loop takes its inputs itself (:attr:`poll_inputs`) at each tick: while it
+        ticks freely; not while paused, holding for the first command or in lockstep (then it
+        waits for commands, which the executor's callbacks deliver)."""
+        return not (self._paused or self._holding or self.options.lockstep)
 
     @property
     def recorders(self) -> list:
@@ -309,6 +332,8 @@ class TickLoop:
             self.sim.blocks_compiled()  # the compiled tick is loaded before the first deadline
             self._emit(self.sim.sample(singular_values=True))
             self._holding = self.options.wait_for_command
+            if not self._holding:
+                self._mark_start()
             self._next_diagnostics = self._clock() + self.options.diagnostics_period
             while not self._stop:
                 self._serve_requests()
@@ -346,11 +371,16 @@ class TickLoop:
         if self.commands.wait_fresh(HOLD_REPUBLISH):
             self._holding = False
             self.pacer.restart()
+            self._mark_start()
             self.outputs.notice("started", f"first command: running from t = {self.time:.6g} s")
             return
         sim = self.sim
         self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
         self._periodic()
+
+    def _mark_start(self) -> None:
+        if self.ticking_since is None:
+            self.ticking_since = (self._clock(), time.process_time())
 
     def _duration_reached(self) -> bool:
         d = self.options.duration
@@ -389,11 +419,21 @@ class TickLoop:
             self.gate.open(max(now + GATE_OPEN_SHARE * (due - now), now + GATE_MIN_OPEN))
 
     def _close_gate(self) -> None:
-        """Stop ROS callbacks for the tick, after their minimal turn since the previous one."""
-        left = GATE_MIN_OPEN - (self._clock() - self._gate_opened)
+        """Stop ROS callbacks for the tick, after their minimal turn since the previous one;
+        while the loop takes the commands itself, after one turn per :data:`SERVICE_TURN`."""
+        now = self._clock()
+        left = GATE_MIN_OPEN - (now - self._gate_opened)
         if left > 0:
+            if self._polling() and now - self._last_turn < SERVICE_TURN:
+                self.gate.close()  # behind schedule: catch up; the services had a turn lately
+                return
             self._sleep(left)
+            now = self._clock()
+        self._last_turn = now
         self.gate.close()
+
+    def _polling(self) -> bool:
+        return self.poll_inputs is not None and self.polls_inputs
 
     def _interrupted(self) -> bool:
         return (
@@ -403,6 +443,8 @@ class TickLoop:
         )
 
     def _tick(self) -> None:
+        if self._polling():
+            self.poll_inputs()
         latched = self.commands.latch()
         if latched.timed_out:
             self.outputs.notice(
@@ -426,7 +468,8 @@ class TickLoop:
             if forces:
                 outputs.dynamics(sample, t)
                 self.monitor.observe(sample)
-            self.logs.write(sample)
+            if self.recorders:
+                self.logs.write(sample)
             if draw:
                 outputs.markers(sample, t)
                 self._next_markers = now + opts.marker_period
@@ -435,13 +478,18 @@ class TickLoop:
         """One tick; its sample when ``observed``. With a compiled fixed-step integrator the
         step, the guard and the sample are one compiled call (a block of one tick: 15 µs where
         ``advance`` then ``sample`` take 43 µs on four_bar); the smallest singular value of the
-        closure Jacobian joins the forces every ``SIGMA_PERIOD``."""
+        closure Jacobian joins the forces every ``SIGMA_PERIOD``.
+
+        Without recorders the sample's arrays are views of the block, refilled by the next tick
+        (the outputs and the monitor copy what they keep); recorders get a sample of their own.
+        """
         sim = self.sim
-        if observed and sim.blocks_compiled():
+        if observed and (self._block_for is sim or sim.blocks_compiled()):
             if self._block_for is not sim:
                 self._block, self._block_for = SampleBlock(sim.model, 1), sim
+                self._row = RowSample(self._block)
             sim.advance_block(self._block, 1)
-            sample = self._block.sample(0)
+            sample = self._block.sample(0) if self.recorders else self._row.refresh()
             if self._sigma_due(forces):
                 sample.sigma_min = sim.smallest_singular_value()
             return sample

@@ -38,30 +38,37 @@ class EnergyLedger:
 
     def reset(self) -> None:
         """Start a new balance at the next sample."""
-        self._prev: Sample | None = None
+        self._started = False
+        self._t = 0.0
+        self._qd: np.ndarray | None = None
+        self._dissipation = 0.0
         self._e0 = 0.0
         self.work = 0.0
         self.residual = 0.0
         self.max_residual = 0.0
 
     def update(self, sample: Sample) -> float:
-        """Add one sample.
+        """Add one sample (the ledger keeps copies of what it needs: the sample's arrays may be
+        refilled afterwards).
 
         Returns
         -------
         float
             The current residual, J.
         """
-        prev = self._prev
-        if prev is None:
-            self._e0 = float(sample.energy[3])
+        total = float(sample.energy[3])
+        if not self._started:
+            self._started = True
+            self._e0 = total
         else:
-            rate_start = float(sample.effort @ prev.qd) - prev.dissipation
+            rate_start = float(sample.effort @ self._qd) - self._dissipation
             rate_end = sample.power_in - sample.dissipation
-            self.work += 0.5 * (rate_start + rate_end) * (sample.t - prev.t)
-            self.residual = float(sample.energy[3]) - self._e0 - self.work
+            self.work += 0.5 * (rate_start + rate_end) * (sample.t - self._t)
+            self.residual = total - self._e0 - self.work
             self.max_residual = max(self.max_residual, abs(self.residual))
-        self._prev = sample
+        self._t = sample.t
+        self._qd = sample.qd.copy()
+        self._dissipation = sample.dissipation
         return self.residual
 
 
@@ -106,7 +113,7 @@ class Monitor:
         w = self._window
         w.max_closure_error = max(w.max_closure_error, err)
         self.max_closure_error = max(self.max_closure_error, err)
-        if np.isfinite(sample.sigma_min):
+        if math.isfinite(sample.sigma_min):
             w.sigma_min = min(w.sigma_min, float(sample.sigma_min))
 
     def report(self, sim_time: float, pacing: PacingStats, counters: dict | None = None) -> dict:

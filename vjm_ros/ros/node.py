@@ -26,7 +26,7 @@ topic                           type                                      when
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
 ==============================  ========================================  =========================
 
-Message layouts: :mod:`vjm_ros.ros.conversions`. Header stamps are simulated time, which only
+Message layouts: :mod:`vjm_ros.ros.conversions` (the per-tick ones published as serialized bytes, :mod:`vjm_ros.ros.wire`). Header stamps are simulated time, which only
 increases (also across ``~/reset``); the node itself runs on the wall clock (it publishes
 ``/clock`` but does not use it). Services: ``~/pause``
 (``std_srvs/SetBool``), ``~/step`` (``std_srvs/Trigger``, one tick while paused), ``~/reset``
@@ -37,7 +37,10 @@ A controller that starts with the simulator should be paired with ``-p wait_for_
 ``lockstep`` (every tick waits for its command).
 
 Threads: the tick loop (:class:`~vjm_ros.realtime.loop.TickLoop`) owns the main thread; a background
-thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the subscriptions and services.
+thread spins the executor with ``spin_once(timeout_sec=0.05)`` for the services and parameters.
+The tick loop takes the commands itself at the start of each tick while it ticks freely; while
+paused, holding for the first command or in lockstep, the executor delivers them
+(:class:`~vjm_ros.ros.runtime.PolledGroup`).
 
 Exit codes:
 
@@ -94,7 +97,8 @@ from vjm_ros.realtime.parameters import (
     ticks_between,
 )
 from vjm_ros.ros import conversions as conv
-from vjm_ros.ros.runtime import Spinner, StopOnSignals, raise_priority
+from vjm_ros.ros.runtime import PolledGroup, Spinner, StopOnSignals, raise_priority, take_all
+from vjm_ros.ros.wire import TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.simulator import Sample, Simulator
@@ -202,8 +206,14 @@ class SimNode(Node):
         self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
                              recorders, paused=self.config.start_paused)
         self._publish_scene()
-        self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts, 10)
-        self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands, 10)
+        polled = PolledGroup(lambda: self.loop.polls_inputs)
+        self._polled = [
+            (self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts,
+                                      10, callback_group=polled), self._on_efforts),
+            (self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands,
+                                      10, callback_group=polled), self._on_joint_commands),
+        ]
+        self.loop.poll_inputs = self._poll_commands
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -291,7 +301,7 @@ class SimNode(Node):
                 self._wrench_pubs[name] = self.create_publisher(
                     WrenchStamped, conv.wrench_topic(name), 10)
         self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
-        self._messages = conv.TickMessages(self._joint_names, self._closure_names)
+        self._wire = TickWire(self._joint_names, self._closure_names)
         self._trace = conv.TipTrace(len(model.chains))
 
     # ------------------------------------------------------------------ outputs (loop thread)
@@ -309,20 +319,20 @@ class SimNode(Node):
 
     def clock(self, t: float) -> None:
         """Publish ``/clock``."""
-        self._clock_pub.publish(self._messages.fill_clock(t))
+        self._clock_pub.publish(self._wire.clock_at(t))
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
-        self._joint_pub.publish(self._messages.fill_joint_state(t, q, qd, effort))
+        self._joint_pub.publish(self._wire.joint_state(t, q, qd, effort))
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
         forces = sample.closure_force
-        messages = self._messages
-        self._forces_pub.publish(messages.fill_constraint_forces(forces))
-        for i, (pub, force) in enumerate(zip(self._wrench_list, forces, strict=True)):
-            pub.publish(messages.fill_wrench(i, force, t))
-        self._energy_pub.publish(messages.fill_energy(sample.energy))
+        wire = self._wire
+        self._forces_pub.publish(wire.constraint_forces(forces))
+        for i, pub in enumerate(self._wrench_list):
+            pub.publish(wire.wrench(i, forces[i], t))
+        self._energy_pub.publish(wire.energy_values(sample.energy))
 
     def markers(self, sample: Sample, t: float) -> None:
         """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
@@ -353,13 +363,18 @@ class SimNode(Node):
         suffix = f" ({held} more suppressed in the last {WARNING_PERIOD:g} s)" if held else ""
         self.get_logger().warning(text + suffix)
 
-    # ------------------------------------------------------------------ inputs (executor thread)
+    # ------------------------------------------------------------------ inputs (tick loop or executor thread)
     def _on_efforts(self, msg: Float64MultiArray) -> None:
         self._judge("~/effort_commands", self.loop.commands.submit_array(conv.efforts_of(msg)))
 
     def _on_joint_commands(self, msg: JointState) -> None:
         names, efforts = conv.named_efforts(msg)
         self._judge("~/joint_commands", self.loop.commands.submit_named(names, efforts))
+
+    def _poll_commands(self) -> None:
+        """Run the command handlers on what arrived since the previous tick (loop thread)."""
+        for handler, msg in take_all(self._polled):
+            handler(msg)
 
     def _judge(self, topic: str, verdict: Verdict) -> None:
         if not verdict.accepted:
@@ -429,9 +444,16 @@ class SimNode(Node):
             self.loop.logs.active.remove(rec)
 
     def summary(self, reason: str, wall: float, cpu: float) -> dict:
-        """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s."""
+        """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s.
+
+        ``ticking_wall_time`` and ``ticking_cpu_time`` (s) count from the first tick on (after a
+        ``wait_for_command`` hold), the figures a per-tick cost is taken from.
+        """
         loop = self.loop
         stats = loop.pacer.stats
+        since = loop.ticking_since
+        ticking = ((time.perf_counter() - since[0], time.process_time() - since[1])
+                   if since is not None else (0.0, 0.0))
         return {
             "scene": self.scene.name,
             "reason": reason,
@@ -439,6 +461,8 @@ class SimNode(Node):
             "ticks": loop.sim.ticks,
             "wall_time": wall,
             "cpu_time": cpu,
+            "ticking_wall_time": ticking[0],
+            "ticking_cpu_time": ticking[1],
             "realtime_factor": loop.sim.t / wall if wall > 0 else None,
             "realtime": loop.options.realtime,
             "lockstep": loop.options.lockstep,

@@ -4,7 +4,9 @@
   (the pattern that kept 1 kHz with 2000 incoming messages per second on this machine), between
   the ticks when given the tick loop's gate;
 * :class:`StopOnSignals` turns SIGINT and SIGTERM into a clean stop of the tick loop;
-* :func:`raise_priority` puts the tick loop's thread under SCHED_FIFO (Linux).
+* :func:`raise_priority` puts the tick loop's thread under SCHED_FIFO (Linux);
+* :class:`PolledGroup` hands subscriptions to the tick loop, which takes their messages itself
+  (:func:`take_all`) while it ticks freely.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ import threading
 import traceback
 from typing import TYPE_CHECKING
 
+from rclpy.callback_groups import CallbackGroup
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import ExternalShutdownException
 
 from vjm_ros.logs.signals import StopSignals
@@ -66,6 +70,54 @@ class Spinner:
                 if not self.executor.context.ok():
                     return
                 traceback.print_exc()
+
+
+class PolledGroup(CallbackGroup):
+    """A callback group whose subscriptions the executor leaves alone while ``polled()`` is true.
+
+    The tick loop then takes their messages at the start of each tick (:func:`take_all`): at
+    1 kHz of commands the executor thread spent about 240 µs of CPU per message here (wait set,
+    take, dispatch), the tick loop's take about a tenth of it. When ``polled()`` is false
+    (paused, holding for the first command, lockstep) the executor runs the callbacks as usual.
+
+    Parameters
+    ----------
+    polled : callable
+        Whether the tick loop takes the messages now (read by the executor thread).
+    """
+
+    def __init__(self, polled) -> None:
+        super().__init__()
+        self.polled = polled
+
+    def can_execute(self, entity) -> bool:
+        """Whether the executor may wait for and run the entity's callbacks now."""
+        return not self.polled()
+
+    def beginning_execution(self, entity) -> bool:
+        """Callbacks of this group may run side by side (each takes its own message)."""
+        return True
+
+    def ending_execution(self, entity) -> None:
+        """Nothing to release."""
+
+
+def take_all(subscriptions) -> list:
+    """Take every message waiting on ``subscriptions`` (pairs of subscription and handler) and
+    return ``(handler, message)`` pairs in order of reception (the messages' received
+    timestamps; within one subscription, the order taken)."""
+    taken = []
+    for sub, handler in subscriptions:
+        try:
+            with sub.handle:
+                while (got := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
+                    msg, info = got
+                    taken.append((info.get("received_timestamp", 0), len(taken), handler, msg))
+        except InvalidHandle:  # destroyed while shutting down
+            continue
+    if len(taken) > 1:
+        taken.sort(key=lambda item: item[:2])
+    return [(handler, msg) for _, _, handler, msg in taken]
 
 
 class StopOnSignals(StopSignals):

@@ -5,11 +5,15 @@ run and with one subscriber process on every topic the node publishes (this proc
 
 1. **node**: ``vjm_sim_node`` in fast mode (``realtime:=false``) for ``seconds`` simulated
    seconds at 1 kHz; process CPU time per tick from its exit summary (tick loop, executor and DDS
-   threads);
+   threads), counted from the first tick. The node holds its start state
+   (``wait_for_command:=true``) until this process has heard it on every per-tick topic and sent
+   it one command (the scene's default efforts): a node that published before its subscriber was
+   matched would look cheaper than it is;
 2. **bare publish**: :mod:`vjm_ros.ros.bare_publish`, the same messages on the same topics per
    tick from prebuilt messages, as fast as it can; process CPU time per tick;
-3. **physics**: the node's tick path (one compiled call per tick for the step, the guard and
-   the sample) in this process, CPU time per tick.
+3. **physics**: the node's physics (one compiled call per tick for the step, the guard and
+   every observable, ``Simulator.advance_block`` of one tick) in this process, CPU time per
+   tick.
 
 The ratio ``node / (physics + bare publish)`` is the node's overhead over its floor (issue
 target: at most 1.3). CPU times on a shared 2-core machine vary from run to run: compare the
@@ -37,7 +41,7 @@ RATE = 1000.0
 
 def physics_per_tick(scene: str, ticks: int = 3000) -> float:
     """CPU seconds per tick of the node's physics: one compiled call for the step, the guard and
-    the sample (``advance_block`` of one tick) and the sample handed out, as the tick loop does."""
+    every observable (``advance_block`` of one tick), as the tick loop makes it."""
     sc = load_scene(scene)
     sim = Simulator(sc.model, SimulationSettings(rate=RATE), sc.gains)
     if sc.model.actuators:
@@ -48,7 +52,6 @@ def physics_per_tick(scene: str, ticks: int = 3000) -> float:
     c0 = time.process_time()
     for _ in range(ticks):
         sim.advance_block(block, 1)
-        block.sample(0)
     return (time.process_time() - c0) / ticks
 
 
@@ -65,18 +68,41 @@ def bare_publish_per_tick(scene: str, ticks: int) -> tuple[float, int]:
     return figures["cpu_time"] / figures["ticks"], figures["topics"]
 
 
+PER_TICK = ("/clock", "/joint_states", "/vjm_sim_node/constraint_forces", "/vjm_sim_node/energy")
+"""Topics the node publishes every tick besides the wrenches (names as the sink sees them)."""
+MATCH_TIMEOUT = 60.0
+"""Longest wait for the node to be heard on every per-tick topic, wall s (then it starts anyway)."""
+
+
+def start_when_heard(sink, efforts: list[float], proc) -> None:
+    """Send the node its first command once ``sink`` hears it on ``/joint_states`` (republished
+    while it holds) and knows a publisher on every per-tick topic; a node that exits first or
+    is not heard within :data:`MATCH_TIMEOUT` is started all the same."""
+    topics = [t for t in sink.counts if t in PER_TICK or t.endswith("/wrench")]
+    deadline = time.monotonic() + MATCH_TIMEOUT
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (sink.counts["/joint_states"] > 0 and sink.commands_matched()
+                and all(sink.node.count_publishers(t) > 0 for t in topics)):
+            break
+        time.sleep(0.01)
+    sink.publish_efforts(efforts)
+
+
 def measure(scene: str, seconds: float) -> dict:
     """The three costs of one scene (µs per tick) and the ratio."""
     from vjm_ros.ros.probes import TopicSink
 
-    closures = [c.name for c in load_scene(scene).model.closures]
+    model = load_scene(scene).model
+    efforts = [float(a.effort) for a in model.actuators]
     ticks = int(round(seconds * RATE))
-    with TopicSink("vjm_cost_sink", closures) as sink:
-        node = run_node(node_command(scene, RATE, seconds, False, ["marker_rate_hz:=10.0"]))
+    with TopicSink("vjm_cost_sink", model.closure_names, commands=True) as sink:
+        node = run_node(node_command(scene, RATE, seconds, False,
+                                     ["marker_rate_hz:=10.0", "wait_for_command:=true"]),
+                        during=lambda proc: start_when_heard(sink, efforts, proc))
         received_node = dict(sink.counts)
         bare, topics = bare_publish_per_tick(scene, ticks)
     physics = physics_per_tick(scene)
-    node_tick = node["cpu_time"] / max(node["ticks"], 1)
+    node_tick = node["ticking_cpu_time"] / max(node["ticks"], 1)
     return {
         "scene": scene,
         "ticks": node["ticks"],

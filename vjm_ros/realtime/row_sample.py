@@ -1,0 +1,36 @@
+"""One row of a block of samples as a reusable sample, without copies (the tick loop's)."""
+
+from __future__ import annotations
+
+import math
+
+from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
+
+
+class RowSample:
+    """The first row of a :class:`~vjm_ros.sim.simulator.SampleBlock` as one reusable
+    :class:`~vjm_ros.sim.simulator.Sample` whose arrays are views of the block (no copies).
+
+    Parameters
+    ----------
+    block : SampleBlock
+    """
+
+    def __init__(self, block: SampleBlock):
+        self.block = block
+        fields = dict(BLOCK_FIELDS)
+        self._power = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "power_in"))
+        self._dissipation = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "dissipation"))
+        views = {attr: getattr(block, key)[0] for key, attr in fields.items()
+                 if attr not in ("power_in", "dissipation")}
+        self.sample = Sample(t=0.0, effort=block.effort, power_in=0.0, dissipation=0.0, **views)
+
+    def refresh(self) -> Sample:
+        """The sample of the tick the block holds now (valid until the next tick)."""
+        s, b = self.sample, self.block
+        s.t = float(b.t[0])
+        s.effort = b.effort
+        s.power_in = float(self._power[0])
+        s.dissipation = float(self._dissipation[0])
+        s.sigma_min = math.nan
+        return s
