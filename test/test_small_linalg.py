@@ -51,7 +51,7 @@ def test_block_factors_equal_the_dense_ones(sizes):
     m, blocks = _block_diagonal(rng, sizes)
     n = m.shape[0]
     dense, dpiv = m.copy(), np.empty(n, dtype=np.int64)
-    small_linalg.lu_factor(dense, dpiv)
+    small_linalg.lu_factor_blocks(dense, dpiv, np.array([0, n], dtype=np.int64))
     lu, piv = m.copy(), np.empty(n, dtype=np.int64)
     small_linalg.lu_factor_blocks(lu, piv, blocks)
     assert np.array_equal(piv, dpiv)

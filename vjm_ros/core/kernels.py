@@ -58,9 +58,7 @@ import numpy as np
 from vjm_ros.core.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
 from vjm_ros.core.jit import jit as _jit
 from vjm_ros.core.small_linalg import (
-    lu_factor,
     lu_factor_blocks,
-    lu_solve,
     lu_solve_blocks,
     min_norm_correction,
 )
@@ -416,7 +414,8 @@ def workspace(n: int, r: int, blocks: np.ndarray | None = None) -> tuple[np.ndar
     return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
             np.empty((r, r)), np.empty((3, m)), np.empty(r), np.empty(n), np.zeros((4, n)),
             np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n), blocks,
-            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64))
+            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64),
+            np.array([0, n], dtype=np.int64))
 
 
 @_jit(allocates=False)
@@ -430,7 +429,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     it: the same numbers, one evaluation fewer); ``row = -1``: nothing known."""
     n = q0.shape[0]
     r = crow.shape[0]
-    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch = work
+    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, whole = work
     q = out_a
     qd = out_b
     for j in range(n):
@@ -572,8 +571,8 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                     for i in range(r):
                         s += jac[i, k] * rhs[i]
                     acc[k] = h * (tau[k] - bias[k] + s)
-                status = max(status, lu_factor(lu, piv))
-                lu_solve(lu, piv, acc)
+                status = max(status, lu_factor_blocks(lu, piv, whole))
+                lu_solve_blocks(lu, piv, acc, whole)
                 for j in range(n):
                     acc[j] += qd[j]
             if op == IMPLICIT_VELOCITY:

@@ -11,74 +11,19 @@ from vjm_ros.core.jit import jit as _jit
 
 
 @_jit(allocates=False)
-def lu_factor(a, piv):
-    """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``).
+def lu_factor_blocks(a, piv, blocks):
+    """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``), of a
+    block-diagonal ``a`` (blocks ``blocks[b] .. blocks[b + 1] - 1``), one block at a time.
+
+    The mass matrix of independent open chains is block-diagonal by chain: factoring block by
+    block costs the sum of the blocks' cubes instead of ``n^3`` and gives the same factors as a
+    dense factorization (a pivot never leaves its block; the skipped entries are zeros). A
+    general matrix is one block, ``blocks = [0, n]``.
 
     Returns
     -------
     int
         0, or 1 when a pivot is exactly zero (singular matrix).
-    """
-    n = a.shape[0]
-    status = 0
-    for k in range(n):
-        p = k
-        big = abs(a[k, k])
-        for i in range(k + 1, n):
-            v = abs(a[i, k])
-            if v > big:
-                big = v
-                p = i
-        piv[k] = p
-        if p != k:
-            for j in range(n):
-                t = a[k, j]
-                a[k, j] = a[p, j]
-                a[p, j] = t
-        d = a[k, k]
-        if d == 0.0:
-            status = 1
-            continue
-        inv = 1.0 / d
-        for i in range(k + 1, n):
-            a[i, k] *= inv
-            f = a[i, k]
-            if f != 0.0:
-                for j in range(k + 1, n):
-                    a[i, j] -= f * a[k, j]
-    return status
-
-
-@_jit(allocates=False)
-def lu_solve(a, piv, b):
-    """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor`'s output."""
-    n = a.shape[0]
-    for k in range(n):
-        p = piv[k]
-        if p != k:
-            t = b[k]
-            b[k] = b[p]
-            b[p] = t
-    for i in range(n):
-        s = b[i]
-        for j in range(i):
-            s -= a[i, j] * b[j]
-        b[i] = s
-    for i in range(n - 1, -1, -1):
-        s = b[i]
-        for j in range(i + 1, n):
-            s -= a[i, j] * b[j]
-        b[i] = s / a[i, i]
-
-
-@_jit(allocates=False)
-def lu_factor_blocks(a, piv, blocks):
-    """:func:`lu_factor` of a block-diagonal ``a`` (blocks ``blocks[b] .. blocks[b + 1] - 1``),
-    one block at a time.
-
-    The mass matrix of independent open chains is block-diagonal by chain: factoring block by
-    block costs the sum of the blocks' cubes instead of ``n^3`` and gives the same factors (a
-    pivot never leaves its block; the skipped entries are zeros).
     """
     status = 0
     for b in range(blocks.shape[0] - 1):
@@ -136,7 +81,7 @@ def lu_solve_range(a, piv, b, lo, hi):
 
 @_jit(allocates=False)
 def lu_solve_blocks(a, piv, b, blocks):
-    """Solve ``A x = b`` in place in ``b`` from :func:`lu_factor_blocks`'s output."""
+    """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor_blocks`'s output."""
     for k in range(blocks.shape[0] - 1):
         lu_solve_range(a, piv, b, blocks[k], blocks[k + 1])
 
