@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from vjm_ros.app import log_cost
-from vjm_ros.app.log_cost import LOG_COST_HEADING, section, with_section
+from vjm_ros.app.log_cost import LOG_COST_HEADING
+from vjm_ros.studies.pages import section, with_section
 
 PAGE = "# Title\n\nintro\n\n## First\n\none\n\n## Last\n\ntwo\n"
 
@@ -15,6 +16,7 @@ def test_section_is_replaced_in_place_or_appended():
     assert replaced == "# Title\n\nintro\n\n## First\n\nnew\n\n## Last\n\ntwo\n"
     assert with_section(PAGE, "## Last", "## Last\n\nnew\n") == PAGE.replace("two", "new")
     assert with_section(PAGE, "## Added", "## Added\n\nx") == PAGE + "\n## Added\n\nx\n"
+    assert with_section("", "## Added", "## Added\n\nx") == "## Added\n\nx\n"  # a new page
 
 
 def test_measure_runs_every_configuration_and_renders_its_section(tmp_path):

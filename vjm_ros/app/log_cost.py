@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from vjm_ros.studies.pages import with_section
+
 CONFIGS = ("physics", "+csv", "+mcap", "+rrd", "all")
 
 
@@ -126,28 +128,6 @@ def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float
 
 LOG_COST_HEADING = "## Cost of the logs of `vjm run`"
 """Heading of the section of ``docs/accuracy.md`` written by ``--docs``."""
-
-
-def section(text: str, heading: str) -> str | None:
-    """The section of a Markdown page that starts with the line ``heading``, up to the next
-    ``## `` heading (without it); None when the page has none."""
-    lines = text.splitlines(keepends=True)
-    starts = [i for i, ln in enumerate(lines) if ln.rstrip("\n") == heading]
-    if not starts:
-        return None
-    end = next((i for i in range(starts[0] + 1, len(lines)) if lines[i].startswith("## ")),
-               len(lines))
-    return "".join(lines[starts[0] : end])
-
-
-def with_section(text: str, heading: str, body: str) -> str:
-    """``text`` with its ``heading`` section replaced by ``body`` (appended when absent)."""
-    old = section(text, heading)
-    body = body.rstrip("\n") + "\n"
-    if old is None:
-        return text.rstrip("\n") + "\n\n" + body
-    tail = "\n" if text.index(old) + len(old) < len(text) else ""
-    return text.replace(old, body + tail, 1)
 
 
 TARGET = 1.5

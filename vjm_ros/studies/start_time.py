@@ -36,6 +36,8 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from vjm_ros.studies.pages import with_section
+
 HEADING = "## Start time"
 """Heading of the section of ``docs/accuracy.md`` this study writes."""
 
@@ -265,15 +267,7 @@ def render_section(row: dict, when: str) -> str:
 def write_section(path: Path, section: str) -> None:
     """Put ``section`` in the page at ``path`` in place of its start-time section, or at its end."""
     text = path.read_text() if path.exists() else ""
-    lines = text.splitlines(keepends=True)
-    heads = [i for i, line in enumerate(lines) if line.rstrip("\n") == HEADING]
-    if not heads:
-        path.write_text(text.rstrip("\n") + ("\n\n" if text else "") + section)
-        return
-    start = heads[0]
-    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-    tail = "".join(lines[end:])
-    path.write_text("".join(lines[:start]) + section + ("\n" + tail if tail else ""))
+    path.write_text(with_section(text, HEADING, section))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -39,6 +39,7 @@ from vjm_ros.studies.bench.runs import (
 from vjm_ros.studies.bench.scaling import (
     _scaling_keys,
 )
+from vjm_ros.studies.pages import sections
 
 
 def _closure_stats(rows: dict[str, list[RowResult]], label: str, fixed_only: bool = True):
@@ -49,22 +50,6 @@ def _closure_stats(rows: dict[str, list[RowResult]], label: str, fixed_only: boo
            if r.engine == "vjm" and r.closure == label and r.ok and r.position_deviation is not None
            and (r.step is not None or not fixed_only)]
     return (min(vals), max(vals), min(pos), max(pos)) if vals and pos else None
-
-
-def sections(text: str) -> dict[str, str]:
-    """The ``## `` sections of a Markdown page by heading, each with its heading line."""
-    found: dict[str, str] = {}
-    head, body = None, []
-    for line in text.splitlines(keepends=True):
-        if line.startswith("## "):
-            if head is not None:
-                found[head] = "".join(body)
-            head, body = line[3:].strip(), [line]
-        elif head is not None:
-            body.append(line)
-    if head is not None:
-        found[head] = "".join(body)
-    return found
 
 
 def merge_kept_sections(generated: str, previous: str) -> str:
