@@ -221,8 +221,9 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
                     sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
             finally:
                 traj.extend(block)
-                for i in range(len(block)):
-                    pts[first + i], ends[first + i] = _positions(scene.model, block.q[i])
+                done = len(block)  # the block observed the points and link ends already
+                pts[first:first + done] = block.points[:done]
+                ends[first:first + done] = block.segments[:done, :, 1]
     except DivergenceError as exc:
         res.status, res.message, res.diverged_at = DIVERGED, str(exc), exc.time
         res.finite = False
