@@ -13,7 +13,7 @@ Operations:
   ``advance`` as the simulator calls it (the kernel side uses the fused integrator);
 * ``simulator_tick``: one ``Simulator.advance()`` (the tick plus the divergence guard). Case
   ``numba_guard`` also reads the guard's closure errors from the kernel
-  (:meth:`vjm_ros.core.compiled.FastMechanism.closure_errors`), as the simulator would with a fast
+  (:meth:`vjm_ros.core.mechanism.Mechanism.closure_errors`), as the simulator would with a fast
   mechanism; the reference guard evaluates the closures with numpy on every tick.
 """
 
@@ -23,10 +23,11 @@ import numpy as np
 import pytest
 from oracle.mechanism import Mechanism
 
-from vjm_ros.core.compiled import HAVE_NUMBA, FastMechanism, fuse_integrator
+from vjm_ros.core.compiled import HAVE_NUMBA, fuse_integrator
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import DivergenceError
 from vjm_ros.core.integrators import make_integrator
+from vjm_ros.core.mechanism import Mechanism as FastMechanism
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 

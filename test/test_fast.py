@@ -41,8 +41,6 @@ from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import (
     HAVE_NUMBA,
-    FastEvaluation,
-    FastMechanism,
     FusedExplicitEuler,
     FusedImplicitPenaltyEuler,
     FusedRK4,
@@ -52,6 +50,8 @@ from vjm_ros.core.compiled import (
 )
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.integrators import make_integrator
+from vjm_ros.core.mechanism import Evaluation as FastEvaluation
+from vjm_ros.core.mechanism import Mechanism as FastMechanism
 from vjm_ros.core.model import (
     ANGLE,
     GROUND,
@@ -441,7 +441,8 @@ def test_kernel_without_compilation():
     script = (
         "import numpy as np\n"
         "from vjm_ros.core.constraints import ExactClosure, PenaltyClosure\n"
-        "from vjm_ros.core.compiled import FastMechanism, FusedRK4\n"
+        "from vjm_ros.core.compiled import FusedRK4\n"
+        "from vjm_ros.core.mechanism import Mechanism as FastMechanism\n"
         "from vjm_ros.scene.loader import load_scene\n"
         "from oracle.mechanism import Mechanism\n"
         "worst = 0.0\n"

@@ -14,7 +14,7 @@ Without numba the kernels run as plain Python (correct, but slow).
 from __future__ import annotations
 
 from vjm_ros.core import kernels as K
-from vjm_ros.core.constraints import ClosureRows, ExactClosure, PenaltyClosure
+from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.integrators import Integrator
 from vjm_ros.core.integrators.fixed import (
     RK4,
@@ -22,7 +22,7 @@ from vjm_ros.core.integrators.fixed import (
     ImplicitPenaltyEuler,
     SemiImplicitEuler,
 )
-from vjm_ros.core.mechanism import Evaluation, Mechanism
+from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
 
 KERNELS = ("auto", "numba")
@@ -32,12 +32,6 @@ Python without), or the same with numba required."""
 HAVE_NUMBA = K.HAVE_NUMBA
 """True when numba is importable (the compiled kernels are then machine code)."""
 
-FastMechanism = Mechanism
-"""The former name of :class:`~vjm_ros.core.mechanism.Mechanism` (kept for callers)."""
-FastEvaluation = Evaluation
-"""The former name of :class:`~vjm_ros.core.mechanism.Evaluation`."""
-FastClosureSet = ClosureRows
-"""The former name of :class:`~vjm_ros.core.constraints.ClosureRows`."""
 
 
 # ---------------------------------------------------------------------------------- integrators
