@@ -9,7 +9,7 @@ import pytest
 
 from vjm_ros.studies import start_time
 
-STAGES = ["import", "numba", "registries", "scene", "kernel", "simulator", "pipeline",
+STAGES = ["import", "numba", "scene", "kernel", "simulator", "pipeline",
           "first_tick"]
 
 
@@ -63,3 +63,34 @@ def test_the_section_shows_the_measured_figures():
     assert "| warm | 0.46 | 0.40 | 0.5 |" in text and "| cold | 7.89 | 7.00 | 3 |" in text
     assert "| stage | " + " | ".join(STAGES) + " |" in text
     assert "numba 0.200" in text
+
+
+def test_a_warm_start_loads_the_compiled_code_without_numbas_compiler_tables(tmp_path):
+    """Loading compiled functions from numba's cache skips the refresh of numba's typing and
+    lowering tables (``core.jit``): a fresh process that runs a tick from a filled cache has not
+    imported the modules that refresh installs, and gives the same numbers as the process that
+    compiled them. The first process fills the cache where it is cold (CI's fresh clone)."""
+    import json
+    import subprocess
+    import sys
+
+    script = (
+        "import json, sys\n"
+        "import numpy as np\n"
+        "from vjm_ros.scene.loader import load_scene\n"
+        "from vjm_ros.sim.settings import resolve_settings\n"
+        "from vjm_ros.sim.simulator import Simulator\n"
+        "sc = load_scene('four_bar')\n"
+        "sim = Simulator(sc.model, resolve_settings(sc.defaults, sc.gains), sc.gains)\n"
+        "for _ in range(5):\n"
+        "    sim.advance()\n"
+        "print(json.dumps({'q': [float(v).hex() for v in sim.q],\n"
+        "                  'tables': 'numba.np.arrayobj' in sys.modules}))\n")
+    runs = []
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                              timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    assert runs[1]["tables"] is False  # the second process only loaded from the cache
+    assert runs[1]["q"] == runs[0]["q"]  # bit for bit

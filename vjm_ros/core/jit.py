@@ -125,6 +125,31 @@ REFCOUNT_FREE = HAVE_NUMBA and _refcount_free_supported()
 """Whether functions that create no arrays are compiled without numba's reference counting."""
 
 
+def _load_without_registries(cache, sig, target_context):
+    """numba's ``Cache.load_overload`` without its refresh of ``target_context``.
+
+    numba refreshes the target context before it looks into a function's cache: that imports and
+    installs every typing and lowering registry it has (about 0.1 s, a fifth of a warm
+    ``vjm run``), which only compiling needs. Rebuilding a cached function needs its code and the
+    runtime, which is initialized here as the refresh would; on a miss numba compiles, and its
+    compiler refreshes the context itself.
+    """
+    from numba.core.runtime import rtsys
+
+    rtsys.initialize(target_context)
+    with cache._guard_against_spurious_io_errors():
+        return cache._load_overload(sig, target_context)
+
+
+def _loads_lazily(dispatcher) -> None:
+    """Make ``dispatcher``'s cache load with :func:`_load_without_registries` where numba's
+    cache has the layout it is written for (otherwise numba's own loading stays)."""
+    cache = getattr(dispatcher, "_cache", None)
+    if all(hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors",
+                                             "load_overload")):
+        cache.load_overload = functools.partial(_load_without_registries, cache)
+
+
 def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged.
 
@@ -149,4 +174,6 @@ def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     options = {"cache": True, "nogil": True, "error_model": "numpy", "inline": inline}
     if not allocates and REFCOUNT_FREE:
         options["_nrt"] = False
-    return _njit(**options)(fn)
+    dispatcher = _njit(**options)(fn)
+    _loads_lazily(dispatcher)
+    return dispatcher

@@ -11,7 +11,7 @@
 4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
    tick (``duration:=0.001``), rclpy start and shutdown included, median of ``repeats``;
 5. **breakdown**, warm and cold: in a fresh process, the wall time of each start stage
-   (:func:`stages`: imports, numba's own registries, each compiled entry point loaded from the
+   (:func:`stages`: imports, each compiled entry point loaded from the
    cache or compiled, the first tick), and from ``python -X importtime`` the import time of each
    top-level package (self times summed; ``-X importtime`` itself slows imports a little).
 
@@ -121,9 +121,8 @@ def stages(scene: str) -> dict[str, float]:
 
     Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator,
     :mod:`vjm_ros.app.cli` itself aside: the studies do not import the app layer),
-    ``numba`` (the numba package, where the stages before did not import it), ``registries``
-    (numba's typing and lowering registries, loaded before the first compiled function is loaded
-    or compiled), ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
+    ``numba`` (the numba package, where the stages before did not import it),
+    ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
     entry point :func:`vjm_ros.core.kernels.step` loaded from numba's cache or compiled, while the
     simulator is built), ``simulator`` (the rest of building it), ``pipeline`` (the compiled
     entry point :func:`vjm_ros.core.pipeline.advance_ticks`, loaded or compiled),
@@ -150,13 +149,10 @@ def stages(scene: str) -> dict[str, float]:
 
     t = lap("import", t)
     try:
-        from numba.core.registry import cpu_target
+        import numba.core.registry  # noqa: F401
     except ImportError:  # no numba: the kernels run as plain Python, nothing to load
-        cpu_target = None
+        pass
     t = lap("numba", t)
-    if cpu_target is not None:
-        cpu_target.target_context.refresh()
-    t = lap("registries", t)
     sc = load_scene(scene)
     settings = resolve_settings(sc.defaults, sc.gains)
     t = lap("scene", t)
@@ -249,8 +245,9 @@ def render_section(row: dict, when: str) -> str:
            f"{row['node_warm_cpu_s']:.2f} | – |"] if "node_warm_s" in row else []),
         "",
         "Stages in a fresh process (s; `kernel`: `kernels.step`, `pipeline`: "
-        "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; `registries`: "
-        "numba's own typing and lowering tables, loaded before the first compiled function):",
+        "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; numba's own "
+        "typing and lowering tables are loaded only when something is compiled, in `scene` "
+        "when cold):",
         "",
         "| stage | " + " | ".join(warm) + " |",
         "|---|" + "---|" * len(warm),
