@@ -348,7 +348,26 @@ def _scaling_text(scaling: dict) -> list[str]:
         g = scaling[family]["growth_exponent"]
         lines += ["", "Growth exponent (cost ∝ n^p, sizes ≥ 4): "
                   + ", ".join(f"{k}: {'–' if v is None else f'{v:.2f}'}" for k, v in g.items()), ""]
+        lines += _bare_step_lines(table, keys)
     return lines
+
+
+def _bare_step_lines(table: list[dict], keys: list[str]) -> list[str]:
+    """The one-link row against its bare steps (``bare``: ``scaling.bare_step_cost``)."""
+    row = next((r for r in table if r.get("bare")), None)
+    if row is None:
+        return []
+    parts = []
+    for k in keys:
+        tick, bare = row.get("observed", {}).get(k), row["bare"].get(k)
+        if tick and bare:
+            parts.append(f"{k}: {1e6 * tick:.2f} µs per tick against {1e6 * bare:.2f} µs per "
+                         f"bare step ({tick / bare:.2f}x)")
+    if not parts:
+        return []
+    return ["One link, 4000 ticks observed in blocks of 200 against the same steps alone in one "
+            "compiled call (nothing observed or stored; the arithmetic a tick cannot go below): "
+            + "; ".join(parts) + ".", ""]
 
 
 def _long_run_line(lr: dict) -> str:

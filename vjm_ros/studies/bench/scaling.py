@@ -121,6 +121,10 @@ SCALING_METHODS = (
 """Settings timed in the cost-per-tick study (1 kHz, one step per tick)."""
 
 
+ONE_LINK_TICKS = 4000
+"""Ticks per repeat of the one-link comparison of observed ticks with bare steps."""
+
+
 def tick_cost(scene: Scene, integrator: str, settings: dict, ticks: int, repeats: int) -> float:
     """Median wall time of one 1 kHz tick, s: ticks run and observed in blocks, as ``vjm run``
     runs them (one compiled call per block with the compiled kernel, tick by tick without).
@@ -149,6 +153,30 @@ def tick_cost(scene: Scene, integrator: str, settings: dict, ticks: int, repeats
         t0 = time.perf_counter()
         while sim.ticks <= ticks:
             sim.advance_block(block, min(BLOCK_TICKS, ticks + 1 - sim.ticks))
+        samples.append((time.perf_counter() - t0) / ticks)
+    return float(statistics.median(samples))
+
+
+def bare_step_cost(scene: Scene, integrator: str, settings: dict, ticks: int,
+                   repeats: int) -> float | None:
+    """Median wall time of one bare step, s: ``ticks`` steps of the same method at 1 kHz in one
+    compiled call (:meth:`~vjm_ros.core.mechanism.Mechanism.advance_fixed`), nothing observed
+    or stored, no projection. The arithmetic a tick cannot go below; None without the compiled
+    block path.
+
+    Parameters and returns as :func:`tick_cost`.
+    """
+    samples = []
+    for _ in range(max(repeats, 1)):
+        sim = Simulator(scene.model, SimulationSettings(integrator=integrator, rate=1000.0,
+                                                        **settings), scene.gains)
+        method = getattr(sim.integrator, "kernel_method", None)
+        if method is None or not hasattr(sim.mechanism, "advance_fixed"):
+            return None
+        q, qd, tau = sim.q, sim.qd, sim.tau
+        sim.mechanism.advance_fixed(method, q, qd, tau, sim.dt, 1)  # warm-up
+        t0 = time.perf_counter()
+        sim.mechanism.advance_fixed(method, q, qd, tau, sim.dt, ticks)
         samples.append((time.perf_counter() - t0) / ticks)
     return float(statistics.median(samples))
 
@@ -197,6 +225,12 @@ def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
                 if progress:
                     progress.advance(_scaling_work(scene, integ, grid, repeats) / len(methods) * 3,
                                      f"scaling {family} {size}")
+            if family == "links" and size == 1:  # enough ticks to time a step of 0.1 us
+                ticks = max(grid.scaling_ticks, ONE_LINK_TICKS)
+                row["bare"] = {key: bare_step_cost(scene, integ, settings, ticks, repeats)
+                               for key, integ, settings in methods}
+                row["observed"] = {key: tick_cost(scene, integ, settings, ticks, repeats)
+                                   for key, integ, settings in methods}
             table.append(row)
         growth = {key: _slope([r["n"] for r in table], [r.get(key) for r in table])
                   for key, _, _ in methods}
