@@ -424,10 +424,11 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     """The compiled entry point (what each ``op`` does: :func:`run`), with its scratch arrays
     given (``work``, from :func:`workspace`): nothing is allocated per call.
 
-    ``known[row]``, shape (n,), for :data:`RK4`, :data:`EXPLICIT_EULER` or
-    :data:`SEMI_IMPLICIT_EULER` and ``row >= 0``: the acceleration at ``(q0, qd0)`` with
-    ``tau``, which the caller has just evaluated (the first stage of the first step then reuses
-    it: the same numbers, one evaluation fewer); ``row = -1``: nothing known."""
+    ``known[row]``, shape (n,), for a fixed-step method and ``row >= 0``: the acceleration at
+    ``(q0, qd0)`` with ``tau``, which the caller has just evaluated with :data:`EVALUATE` into
+    the same buffers (``kin`` .. ``points`` still hold that evaluation): the first stage of the
+    first step then reuses both, the same numbers with one evaluation fewer (:data:`IMPLICIT_EULER`
+    builds its system from the buffers); ``row = -1``: nothing known."""
     n = q0.shape[0]
     r = crow.shape[0]
     lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, whole = work
@@ -476,7 +477,8 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 break
         return status
 
-    reuse = row >= 0 and (op == RK4 or op == EXPLICIT_EULER or op == SEMI_IMPLICIT_EULER)
+    reuse = row >= 0 and (op == RK4 or op == EXPLICIT_EULER or op == SEMI_IMPLICIT_EULER
+                          or op == IMPLICIT_EULER)
     single = op == EVALUATE or op == IMPLICIT_VELOCITY
     stages = 4 if op == RK4 else 1
     total = 1 if single else steps * stages

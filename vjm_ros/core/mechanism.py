@@ -498,8 +498,7 @@ class Mechanism:
             self._work, self._tick_state,
         )
         stages = 4 if method == K.RK4 else 1
-        # the first stage of each tick after the first is taken from the sample before it
-        reused = max(done - 1, 0) if method != K.IMPLICIT_EULER else 0
+        reused = max(done - 1, 0)  # each tick after the first starts from the sample before
         self.evaluations += done * (stages * int(substeps) + 1) - reused
         return int(done), int(code)
 

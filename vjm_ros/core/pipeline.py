@@ -203,9 +203,9 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     o_qdd = out[2]
     o_error = out[6]
     for t in range(ticks):
-        # From the second tick on, the first stage (RK4) or the first step's acceleration (the
-        # explicit methods) is the one observed at the last tick: the same state and efforts.
-        known = t - 1 if method != K.IMPLICIT_EULER else K.NO_ROW  # t = 0: NO_ROW
+        # From the second tick on, the first stage (RK4) or the first step's evaluation is the
+        # one observed at the last tick (the same state and efforts; the buffers still hold it).
+        known = t - 1  # t = 0: NO_ROW
         status = K.step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
                         par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
