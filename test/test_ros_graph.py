@@ -217,7 +217,9 @@ def test_the_nodes_own_log_keeps_time_increasing_across_a_reset(tmp_path):
         call(reset)
         for _ in range(2):
             call(step)
-        wait_for(lambda: len(probe.messages("/joint_states")) >= 7, what="seven states")
+        # the state at t = 0 is published when the node starts, maybe before this subscriber
+        # is matched (volatile QoS): the live graph is sure to see the six that follow calls
+        wait_for(lambda: len(probe.messages("/joint_states")) >= 6, what="six states")
     finally:
         probe.close()
         code, out = reap(node)
@@ -236,5 +238,5 @@ def test_the_nodes_own_log_keeps_time_increasing_across_a_reset(tmp_path):
     tick = 1_000_000
     # t = 0, three steps, the reset state one tick after the last, two steps
     assert stamps == [0, tick, 2 * tick, 3 * tick, 4 * tick, 5 * tick, 6 * tick]
-    assert clock == stamps and live == stamps  # the log and the live graph agree
+    assert clock == stamps and live == stamps[-len(live):]  # the log and the live graph agree
     assert counts["/vjm_sim_node/events"] >= 1
