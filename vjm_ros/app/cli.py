@@ -14,6 +14,7 @@ without it; see :mod:`vjm_ros.logs.storage`); 130 interrupted by SIGINT and 143 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -247,7 +248,7 @@ bar waits no longer than that."""
 
 def _cmd_run(args) -> int:
     from vjm_ros.scene.loader import load_scene
-    from vjm_ros.sim.simulator import SampleBlock, Simulator
+    from vjm_ros.sim.simulator import Simulator
     from vjm_ros.sim.trajectory import Trajectory
 
     scene = load_scene(args.scene)
@@ -271,36 +272,41 @@ def _cmd_run(args) -> int:
     traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2)
     ticks = int(round(duration * settings.rate))
     progress = Progress(duration, sys.stderr.isatty() and sys.stdout.isatty())
-    # Installed before any log is opened: from here on a signal ends the run between two ticks
+    # Installed before any log is opened: from here on a signal ends the run between two blocks
     # and every log is finalized.
     code, error = 0, None
-    logs = None
+    logs = writers = None
     wall0 = time.perf_counter()
     with StopSignals() as stop:
         try:
             recorders = _open_recorders(args, scene, sim, duration)
             logs = LogWriters(recorders, _report_log_failure)
             _record(traj, logs, sim.sample())
-            # Blocks of ticks, each one compiled call where the integrator allows it; signals,
-            # progress and log writes are taken between blocks.
-            block = SampleBlock(scene.model, BLOCK_TICKS)
+            # Blocks of ticks, each one compiled call where the integrator allows it; signals and
+            # progress are taken between blocks; the trajectory, its CSV and each log take the
+            # blocks in threads of their own while the next blocks are computed.
+            writers = _block_writers(scene.model, traj, logs, args.out)
             while sim.ticks < ticks and not stop.requested:
+                block = writers.take()
+                block.rows = 0
                 try:
                     sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
                 finally:  # the ticks before a divergence are kept
-                    traj.extend(block)
-                    if logs.active:
-                        logs.write_block(block)
+                    writers.put(block)
                 progress.update(sim.t)
         except DivergenceError as exc:
             code, error = EXIT_DIVERGED, str(exc)
         finally:
-            wall = time.perf_counter() - wall0
             progress.close()
-            if logs is not None:
-                logs.close()
-                if args.bag is not None and recorders and recorders[0] in logs.active:
-                    _write_bag_metadata(args.bag, recorders[0], logs)
+            try:
+                if writers is not None:
+                    writers.close()  # every block written, the CSV and the logs closed
+            finally:
+                wall = time.perf_counter() - wall0
+                if logs is not None:
+                    logs.close()
+                    if args.bag is not None and recorders and recorders[0] in logs.active:
+                        _write_bag_metadata(args.bag, recorders[0], logs)
     if stop.code and not code:
         code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     if logs is not None and logs.failed and not code:
@@ -311,7 +317,6 @@ def _cmd_run(args) -> int:
         summary["error"] = error
         summary["finite"] = bool(summary["finite"] and code != EXIT_DIVERGED)
     if args.out is not None:
-        traj.write_csv(args.out / "trajectory.csv")
         (args.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         if args.plots and len(traj) > 1:
             from vjm_ros.app.plotting import write_figures
@@ -383,6 +388,27 @@ def _open_recorders(args, scene, sim, duration: float) -> list:
         rate=sim.settings.rate,
         keys=("--bag" if args.bag is not None else "--mcap", "--rrd"),
     )
+
+
+def _block_writers(model, traj, logs, out: Path | None):
+    """The threads that take the blocks of ``vjm run``: one extends the trajectory and writes
+    ``trajectory.csv`` into ``out`` as it grows (when given), one per log."""
+    from vjm_ros.logs.background import BlockFanOut, Consumer
+    from vjm_ros.sim.simulator import SampleBlock
+    from vjm_ros.sim.trajectory import CsvStream
+
+    stream = CsvStream(traj, out / "trajectory.csv") if out is not None else None
+
+    def extend(block) -> None:
+        traj.extend(block)
+        if stream is not None:
+            stream.catch_up()
+
+    consumers = [Consumer("vjm-trajectory", extend, stream.close if stream else None)]
+    consumers += [Consumer(f"vjm-log-{i}", functools.partial(logs.write_block_to, rec),
+                           functools.partial(logs.close_one, rec))
+                  for i, rec in enumerate(logs.active)]
+    return BlockFanOut(lambda: SampleBlock(model, BLOCK_TICKS), consumers)
 
 
 def _record(traj, logs, sample) -> None:
