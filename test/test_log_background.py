@@ -82,6 +82,26 @@ def test_a_failing_consumer_is_raised_by_close_after_the_others_finish():
     fan.close()  # idempotent, raises once
 
 
+def test_no_block_is_written_when_a_consumer_cannot_start():
+    written, finished = [], []
+
+    def cannot_open():
+        raise OSError("cannot open")
+
+    consumers = [Consumer("opens", written.append, lambda: finished.append("opens"),
+                          lambda: None),
+                 Consumer("fails", written.append, lambda: finished.append("fails"),
+                          cannot_open)]
+    fan = BlockFanOut(Box, consumers)
+    with pytest.raises(OSError, match="cannot open"):
+        try:
+            for _ in range(5):
+                fan.put(fan.take())
+        finally:
+            fan.close()
+    assert written == [] and finished == ["opens"]  # what opened is closed, nothing written
+
+
 def test_consumers_run_in_threads_of_their_own():
     names = set()
     with BlockFanOut(Box, [Consumer("vjm-x", lambda b: names.add(
@@ -128,6 +148,26 @@ def test_vjm_run_writes_the_csv_of_the_ticks_one_by_one_with_every_log(tmp_path)
                      str(tmp_path / "run.mcap"), "--rrd", str(tmp_path / "run.rrd"), "--json"])
     assert code == 0
     assert (out / "trajectory.csv").read_bytes() == row_by_row_csv("four_bar", 437)
+
+
+def test_a_log_that_cannot_be_opened_stops_the_run_before_any_output(tmp_path, monkeypatch):
+    from mcap.reader import make_reader
+
+    from vjm_ros.app import cli
+    from vjm_ros.logs import rerun_recorder
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(rerun_recorder.RerunRecorder, "__init__", refuse)
+    out, mcap = tmp_path / "out", tmp_path / "run.mcap"
+    code = cli.main(["run", "four_bar", "--duration", "0.5", "--out", str(out), "--mcap",
+                     str(mcap), "--rrd", str(tmp_path / "run.rrd")])
+    assert code == cli.EXIT_BAD_INPUT
+    assert not (out / "trajectory.csv").exists() and not (out / "summary.json").exists()
+    with mcap.open("rb") as f:  # the log that did open is finalized, with the first sample only
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 0
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

@@ -14,7 +14,6 @@ without it; see :mod:`vjm_ros.logs.storage`); 130 interrupted by SIGINT and 143 
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import sys
 import time
@@ -24,7 +23,6 @@ import numpy as np
 
 from vjm_ros.core.errors import ConfigurationError, DivergenceError, SceneError, VjmError
 from vjm_ros.logs.signals import StopSignals
-from vjm_ros.logs.storage import LogWriters
 
 DEFAULT_SCENE = "four_bar"
 EXIT_BAD_INPUT = 2
@@ -275,38 +273,45 @@ def _cmd_run(args) -> int:
     # Installed before any log is opened: from here on a signal ends the run between two blocks
     # and every log is finalized.
     code, error = 0, None
-    logs = writers = None
+    outputs = None
     wall0 = time.perf_counter()
     with StopSignals() as stop:
         try:
-            recorders = _open_recorders(args, scene, sim, duration)
-            logs = LogWriters(recorders, _report_log_failure)
-            _record(traj, logs, sim.sample())
+            openers = _log_openers(args, scene, sim, duration)
+            first = sim.sample()
+            traj.append(first)
             # Blocks of ticks, each one compiled call where the integrator allows it; signals and
-            # progress are taken between blocks; the trajectory, its CSV and each log take the
-            # blocks in threads of their own while the next blocks are computed.
-            writers = _block_writers(scene.model, traj, logs, args.out)
+            # progress are taken between blocks. The trajectory and its CSV, and each log, take
+            # the blocks in threads of their own (the logs open there too) while the next blocks
+            # are computed.
+            from vjm_ros.app.run_outputs import RunOutputs
+
+            outputs = RunOutputs(traj, first, openers, _report_log_failure,
+                                 None if args.out is None else args.out / "trajectory.csv",
+                                 BLOCK_TICKS)
             while sim.ticks < ticks and not stop.requested:
-                block = writers.take()
+                block = outputs.take()
                 block.rows = 0
                 try:
                     sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
                 finally:  # the ticks before a divergence are kept
-                    writers.put(block)
+                    outputs.put(block)
                 progress.update(sim.t)
         except DivergenceError as exc:
             code, error = EXIT_DIVERGED, str(exc)
         finally:
             progress.close()
             try:
-                if writers is not None:
-                    writers.close()  # every block written, the CSV and the logs closed
+                if outputs is not None:
+                    outputs.close()  # every block written, the CSV closed, the logs finalized
             finally:
                 wall = time.perf_counter() - wall0
-                if logs is not None:
-                    logs.close()
-                    if args.bag is not None and recorders and recorders[0] in logs.active:
-                        _write_bag_metadata(args.bag, recorders[0], logs)
+                if outputs is not None:
+                    outputs.logs.close()
+                    mcap = outputs.recorders.get("--bag")
+                    if mcap is not None and mcap in outputs.logs.active:
+                        _write_bag_metadata(args.bag, mcap, outputs.logs)
+    logs = outputs.logs if outputs is not None else None
     if stop.code and not code:
         code, error = stop.code, f"interrupted by signal {stop.code - 128}"
     if logs is not None and logs.failed and not code:
@@ -369,8 +374,9 @@ def _write_bag_metadata(bag: Path, recorder, logs) -> None:
         _report_log_failure(where, why)
 
 
-def _open_recorders(args, scene, sim, duration: float) -> list:
-    from vjm_ros.logs.opening import open_recorders
+def _log_openers(args, scene, sim, duration: float) -> list:
+    """The storage checks of the logs asked for, and a function per log that opens it."""
+    from vjm_ros.logs.opening import recorder_openers
 
     mcap = args.mcap
     if args.bag is not None:
@@ -378,7 +384,7 @@ def _open_recorders(args, scene, sim, duration: float) -> list:
             raise ConfigurationError("give either --mcap FILE or --bag DIR, not both")
         _prepare_bag(args.bag)
         mcap = _bag_file(args.bag)
-    return open_recorders(
+    return recorder_openers(
         scene.model,
         sim.describe(),
         scene.text,
@@ -388,32 +394,6 @@ def _open_recorders(args, scene, sim, duration: float) -> list:
         rate=sim.settings.rate,
         keys=("--bag" if args.bag is not None else "--mcap", "--rrd"),
     )
-
-
-def _block_writers(model, traj, logs, out: Path | None):
-    """The threads that take the blocks of ``vjm run``: one extends the trajectory and writes
-    ``trajectory.csv`` into ``out`` as it grows (when given), one per log."""
-    from vjm_ros.logs.background import BlockFanOut, Consumer
-    from vjm_ros.sim.simulator import SampleBlock
-    from vjm_ros.sim.trajectory import CsvStream
-
-    stream = CsvStream(traj, out / "trajectory.csv") if out is not None else None
-
-    def extend(block) -> None:
-        traj.extend(block)
-        if stream is not None:
-            stream.catch_up()
-
-    consumers = [Consumer("vjm-trajectory", extend, stream.close if stream else None)]
-    consumers += [Consumer(f"vjm-log-{i}", functools.partial(logs.write_block_to, rec),
-                           functools.partial(logs.close_one, rec))
-                  for i, rec in enumerate(logs.active)]
-    return BlockFanOut(lambda: SampleBlock(model, BLOCK_TICKS), consumers)
-
-
-def _record(traj, logs, sample) -> None:
-    traj.append(sample)
-    logs.write(sample)
 
 
 def _report_log_failure(where: str, why: str) -> None:

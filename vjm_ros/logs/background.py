@@ -11,6 +11,10 @@ chunk compression, file writes).
 
 Guarantees:
 
+* each consumer's ``start`` (opening its file) runs first, in its thread, beside the physics;
+  blocks are written only once every consumer has started; if a ``start`` fails, no block is
+  written, the consumers that did start are finished, and the error is raised in the calling
+  thread (by the next :meth:`put` or by :meth:`close`);
 * every consumer sees every block handed over, in order, exactly once, before :meth:`close`
   returns (also when the run ends by a signal or an exception: ``close`` is called in a
   ``finally``), then runs its ``finish`` (closing its files) in its thread;
@@ -48,12 +52,16 @@ class Consumer:
     write : callable
         ``write(block)``: use the block's rows; must not keep references to its arrays.
     finish : callable, optional
-        Called once in the consumer's thread after the last block (close files).
+        Called once in the consumer's thread after the last block (close files); not called
+        when ``start`` failed.
+    start : callable, optional
+        Called once in the consumer's thread before any block (open files).
     """
 
     name: str
     write: Callable[[object], None]
     finish: Callable[[], None] | None = None
+    start: Callable[[], None] | None = None
 
 
 _STOP = object()
@@ -88,6 +96,8 @@ class BlockFanOut:
         self._closed = False
         self._interval = sys.getswitchinterval()
         sys.setswitchinterval(min(self._interval, SWITCH_INTERVAL))
+        self._starting = threading.Barrier(len(consumers)) if consumers else None
+        self._start_failed = False
         self._queues = [queue.SimpleQueue() for _ in consumers]
         self._threads = [
             threading.Thread(target=self._serve, args=(c, q), name=c.name, daemon=True)
@@ -95,6 +105,11 @@ class BlockFanOut:
         ]
         for thread in self._threads:
             thread.start()
+
+    @property
+    def start_failed(self) -> bool:
+        """Whether a consumer's ``start`` failed (then no block is written)."""
+        return self._start_failed
 
     def take(self):
         """A block to fill: a new one while fewer than ``depth`` exist, else the next one the
@@ -142,7 +157,8 @@ class BlockFanOut:
 
     # ------------------------------------------------------------------ consumer threads
     def _serve(self, consumer: Consumer, blocks: queue.SimpleQueue) -> None:
-        failed = False
+        started = self._start(consumer)
+        failed = not started
         while True:
             block = blocks.get()
             if block is _STOP:
@@ -154,11 +170,31 @@ class BlockFanOut:
                     failed = True
                     self._errors.append(exc)
             self._release(block)
-        if consumer.finish is not None:
+        if started and consumer.finish is not None:
             try:
                 consumer.finish()
             except BaseException as exc:  # noqa: BLE001 - raised again in the caller
                 self._errors.append(exc)
+
+    def _start(self, consumer: Consumer) -> bool:
+        """Run the consumer's ``start``, then wait for every other consumer's. Returns whether
+        this consumer started; blocks are written only if every consumer did."""
+        started = True
+        if consumer.start is not None:
+            try:
+                consumer.start()
+            except BaseException as exc:  # noqa: BLE001 - raised again in the caller
+                started = False
+                self._start_failed = True
+                self._errors.append(exc)
+        self._starting.wait()
+        if started and self._start_failed and consumer.finish is not None:
+            try:  # another consumer could not start: close what this one opened
+                consumer.finish()
+            except BaseException as exc:  # noqa: BLE001 - raised again in the caller
+                self._errors.append(exc)
+            return False
+        return started
 
     def _release(self, block) -> None:
         with self._lock:

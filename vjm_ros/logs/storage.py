@@ -101,10 +101,16 @@ class LogWriters:
     def write(self, sample) -> None:
         """Write ``sample`` to every working recorder."""
         for rec in list(self.active):
-            try:
-                rec.write(sample)
-            except OSError as exc:
-                self._give_up(rec, exc)
+            self.write_to(rec, sample)
+
+    def write_to(self, rec, sample) -> None:
+        """:meth:`write` for one recorder (nothing if it was given up)."""
+        if rec not in self.active:
+            return
+        try:
+            rec.write(sample)
+        except OSError as exc:
+            self._give_up(rec, exc)
 
     def write_block(self, block) -> None:
         """Write every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` to every working
