@@ -239,9 +239,12 @@ def _settings(args, scene):
     )
 
 
-BLOCK_TICKS = 200
-"""Ticks per block of ``vjm run``: about 1 ms of computing at most, so a signal or the progress
-bar waits no longer than that."""
+BLOCK_TICKS = 1000
+"""Ticks per block of ``vjm run``: a few ms of computing (2.5 ms for the four-bar with rk4 and
+exact closure, 60 ms for sixteen chains on one pin), which a signal or the progress bar waits
+at most. Each block has a fixed cost in every output (encoding calls, GIL hand-overs between
+the physics and the writer threads): against blocks of 200 ticks, a run with all three logs
+takes about a sixth less CPU (four_bar, 10 s: 106 -> 88 ms)."""
 
 
 def _cmd_run(args) -> int:

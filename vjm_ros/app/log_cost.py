@@ -155,7 +155,7 @@ def render_section(r: dict) -> str:
         f"`vjm run {r['scene']}` with rk4 at 1 kHz and exact closure for {r['seconds']:g} "
         "simulated seconds, in one process, without and with each log; every configuration "
         f"runs {r['rounds']} times, interleaved with the others, and the best wall time counts: "
-        "the whole run (scene, logs opened, ticks in blocks of 200, logs finalized, "
+        "the whole run (scene, logs opened, ticks in blocks of 1000, logs finalized, "
         "`trajectory.csv` and `summary.json` written), not the interpreter's start-up or the "
         "loading of compiled code and libraries (done once before). Only the ratios are "
         "meaningful, the machine is shared.",

@@ -56,7 +56,7 @@ class RunOutputs:
         self._csv: CsvStream | None = None
         consumers = [Consumer("vjm-trajectory", self._extend, self._close_csv)]
         consumers += [self._log_consumer(key, opener) for key, opener in openers]
-        self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers)
+        self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers, depth=8)
 
     def take(self) -> SampleBlock:
         """A block to fill (see :meth:`BlockFanOut.take`)."""
