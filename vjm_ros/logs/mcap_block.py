@@ -90,10 +90,12 @@ class BlockChunkBuilder(ChunkBuilder):
             index.add(times, offsets)
 
 
-ZSTD_LEVEL = 1
-"""zstd level of the chunks: the level rosbag2's MCAP storage writes by default (the C++ ``mcap``
-writer's ``CompressionLevel::Default``). Against the Python ``mcap`` writer's level 3, the
-four-bar's chunks compress about 1.4 times as fast and 6 % smaller; every zstd reader
+ZSTD_LEVEL = -3
+"""zstd level of the chunks: the C++ ``mcap`` writer's ``CompressionLevel::Fast`` (rosbag2's
+MCAP storage writes level 1, its ``Default``, unless a preset asks for another). On the
+four-bar's 10 s log (40 chunks, 7.3 MB before compression) the chunks compress in 3.4 ms against
+5.0 ms at level 1 and 7.0 ms at the Python writer's level 3, and come to 1.37 MB against 1.28 MB
+and 1.36 MB (the file: 2.2 MB with its indexes, 4 % more than at level 1). Every zstd reader
 decompresses any level."""
 
 
