@@ -82,24 +82,38 @@ def test_a_failing_consumer_is_raised_by_close_after_the_others_finish():
     fan.close()  # idempotent, raises once
 
 
-def test_no_block_is_written_when_a_consumer_cannot_start():
-    written, finished = [], []
+def test_a_consumer_that_cannot_start_writes_nothing_and_its_error_is_raised():
+    written, finished = {"opens": [], "fails": []}, []
 
     def cannot_open():
         raise OSError("cannot open")
 
-    consumers = [Consumer("opens", written.append, lambda: finished.append("opens"),
-                          lambda: None),
-                 Consumer("fails", written.append, lambda: finished.append("fails"),
-                          cannot_open)]
+    consumers = [Consumer("opens", lambda b: written["opens"].append(b.value),
+                          lambda: finished.append("opens"), lambda: None),
+                 Consumer("fails", lambda b: written["fails"].append(b.value),
+                          lambda: finished.append("fails"), cannot_open)]
     fan = BlockFanOut(Box, consumers)
+    assert fan.wait_started() is False and fan.start_failed
     with pytest.raises(OSError, match="cannot open"):
         try:
-            for _ in range(5):
-                fan.put(fan.take())
+            for i in range(5):
+                block = fan.take()
+                block.value = i
+                fan.put(block)
         finally:
             fan.close()
-    assert written == [] and finished == ["opens"]  # what opened is closed, nothing written
+    assert written["fails"] == [] and finished == ["opens"]  # what opened is closed
+    assert written["opens"] == list(range(len(written["opens"])))
+
+
+def test_all_started_once_every_start_returned():
+    release = threading.Event()
+    fan = BlockFanOut(Box, [Consumer("slow", lambda b: None, None, release.wait),
+                            Consumer("quick", lambda b: None, None, lambda: None)])
+    assert not fan.all_started
+    release.set()
+    assert fan.wait_started() and fan.all_started
+    fan.close()
 
 
 def test_consumers_run_in_threads_of_their_own():

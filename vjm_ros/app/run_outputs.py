@@ -32,7 +32,7 @@ class RunOutputs:
     on_failure : callable
         ``on_failure(path, error_text)`` for a log given up during the run (:class:`LogWriters`).
     csv_path : Path, optional
-        ``trajectory.csv``, created once every log has opened.
+        ``trajectory.csv``, created once every log has opened (not at all if one cannot be).
     block_ticks : int
         Rows of each block.
 
@@ -75,7 +75,8 @@ class RunOutputs:
     # ------------------------------------------------------------------ consumers
     def _extend(self, block: SampleBlock) -> None:
         self.traj.extend(block)
-        self._open_csv()
+        if self._fan.all_started:  # the CSV is created only once every log has opened
+            self._open_csv()
         if self._csv is not None:
             self._csv.catch_up()
 
@@ -84,7 +85,7 @@ class RunOutputs:
             self._csv = CsvStream(self.traj, self._csv_path)
 
     def _close_csv(self) -> None:
-        if not self._fan.start_failed:  # also a run without blocks has its first row
+        if self._fan.wait_started():  # also a run without blocks has its first row
             self._open_csv()
         if self._csv is not None:
             self._csv.close()

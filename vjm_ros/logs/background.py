@@ -11,10 +11,11 @@ chunk compression, file writes).
 
 Guarantees:
 
-* each consumer's ``start`` (opening its file) runs first, in its thread, beside the physics;
-  blocks are written only once every consumer has started; if a ``start`` fails, no block is
-  written, the consumers that did start are finished, and the error is raised in the calling
-  thread (by the next :meth:`put` or by :meth:`close`);
+* each consumer's ``start`` (opening its file) runs first, in its thread, beside the physics,
+  and the consumer writes blocks as soon as it has started; a consumer whose ``start`` fails
+  writes nothing and is not finished, and the error is raised in the calling thread (by the
+  next :meth:`put` or by :meth:`close`); :attr:`BlockFanOut.all_started` tells a consumer
+  whether every other one has started (to create a file only then);
 * every consumer sees every block handed over, in order, exactly once, before :meth:`close`
   returns (also when the run ends by a signal or an exception: ``close`` is called in a
   ``finally``), then runs its ``finish`` (closing its files) in its thread;
@@ -96,7 +97,10 @@ class BlockFanOut:
         self._closed = False
         self._interval = sys.getswitchinterval()
         sys.setswitchinterval(min(self._interval, SWITCH_INTERVAL))
-        self._starting = threading.Barrier(len(consumers)) if consumers else None
+        self._starts_left = len(consumers)
+        self._starts_done = threading.Event()
+        if not consumers:
+            self._starts_done.set()
         self._start_failed = False
         self._queues = [queue.SimpleQueue() for _ in consumers]
         self._threads = [
@@ -108,8 +112,18 @@ class BlockFanOut:
 
     @property
     def start_failed(self) -> bool:
-        """Whether a consumer's ``start`` failed (then no block is written)."""
+        """Whether a consumer's ``start`` failed."""
         return self._start_failed
+
+    @property
+    def all_started(self) -> bool:
+        """Whether every consumer's ``start`` has returned, none failing (does not wait)."""
+        return self._starts_done.is_set() and not self._start_failed
+
+    def wait_started(self) -> bool:
+        """Wait until every consumer's ``start`` has returned or failed; :attr:`all_started`."""
+        self._starts_done.wait()
+        return self.all_started
 
     def take(self):
         """A block to fill: a new one while fewer than ``depth`` exist, else the next one the
@@ -177,8 +191,7 @@ class BlockFanOut:
                 self._errors.append(exc)
 
     def _start(self, consumer: Consumer) -> bool:
-        """Run the consumer's ``start``, then wait for every other consumer's. Returns whether
-        this consumer started; blocks are written only if every consumer did."""
+        """Run the consumer's ``start``; whether it started."""
         started = True
         if consumer.start is not None:
             try:
@@ -187,13 +200,10 @@ class BlockFanOut:
                 started = False
                 self._start_failed = True
                 self._errors.append(exc)
-        self._starting.wait()
-        if started and self._start_failed and consumer.finish is not None:
-            try:  # another consumer could not start: close what this one opened
-                consumer.finish()
-            except BaseException as exc:  # noqa: BLE001 - raised again in the caller
-                self._errors.append(exc)
-            return False
+        with self._lock:
+            self._starts_left -= 1
+            if self._starts_left == 0:
+                self._starts_done.set()
         return started
 
     def _release(self, block) -> None:
