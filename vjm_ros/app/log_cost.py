@@ -66,9 +66,11 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
     -------
     dict
         ``ms_per_sim_s`` and ``ratio`` (to the physics-only run) per configuration of
-        :data:`CONFIGS`, with the scene, the simulated seconds and the rounds.
+        :data:`CONFIGS`, with the scene, the simulated seconds, the rounds and the machine's
+        ``load`` average before and after.
     """
     best = dict.fromkeys(CONFIGS, float("inf"))
+    load_before = _load_average()
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
         folder = Path(tmp)
         for config in CONFIGS:  # warm-up: compiled code, log libraries
@@ -83,42 +85,70 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
         "rounds": rounds,
         "ms_per_sim_s": {c: 1e3 * best[c] / seconds for c in CONFIGS},
         "ratio": {c: best[c] / physics for c in CONFIGS},
+        "load": f"{load_before} before, {_load_average()} after (1-minute load average)",
     }
+
+
+def _load_average() -> str:
+    """The machine's 1-minute load average (what else ran on it), or ``"unknown"``."""
+    try:
+        return f"{os.getloadavg()[0]:.2f}"
+    except (AttributeError, OSError):
+        return "unknown"
 
 
 PARTS = (
     ("physics (advance_block)", "sim/simulator.py", "advance_block"),
-    ("csv: trajectory.csv", "sim/trajectory.py", "write_csv"),
+    ("trajectory: extend", "sim/trajectory.py", "extend"),
+    ("csv: trajectory.csv", "sim/trajectory.py", "catch_up"),
     ("mcap: open", "logs/mcap_recorder.py", "__init__"),
     ("mcap: encode blocks", "logs/mcap_block.py", "encode"),
     ("mcap: add records, index", "logs/mcap_block.py", "add_records"),
-    ("mcap: close chunks", "mcap/writer.py", "__finalize_chunk"),
-    ("mcap:   of which zstd", "zstandard/__init__.py", "compress"),
+    ("mcap: close chunks", "logs/mcap_block.py", "_Writer__finalize_chunk"),
+    ("mcap:   of which zstd", "~",
+     "<method 'compress' of 'zstandard.backend_c.ZstdCompressor' objects>"),
     ("mcap: finalize file", "logs/mcap_recorder.py", "_finalize"),
     ("rrd: open", "logs/rerun_recorder.py", "__init__"),
     ("rrd: buffer blocks", "logs/rerun_recorder.py", "write_block"),
     ("rrd:   of which send_columns", "logs/rerun_recorder.py", "send"),
     ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
 )
-"""Parts of the *all* run: label, file (path suffix) and function whose cumulative time it is."""
+"""Parts of the *all* run: label, file (path suffix; ``~`` for a built-in) and function whose
+cumulative time it is, summed over the threads that ran it."""
 
 
 def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float]:
-    """Wall seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile`.
+    """Seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile` in every thread.
 
-    Profiling slows calls down, the more the smaller they are: read the parts as shares of the
-    profiled run (``"run"``), not as absolute times.
+    The physics runs in the calling thread and each output in a thread of its own, beside it:
+    a part is the time of its thread spent in it, and the parts add up to more than the run's
+    wall time (``"run"``) where threads ran at once. Profiling slows calls down, the more the
+    smaller they are: read the parts as shares, not as absolute times.
     """
     import cProfile
     import pstats
+    import threading
+
+    thread_profiles: list[cProfile.Profile] = []
+
+    def profile_thread(frame, event, arg) -> None:  # the first event of each new thread
+        thread_profiles.append(cProfile.Profile())
+        thread_profiles[-1].enable()
 
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
         run_once(scene, min(seconds, 0.5), "all", Path(tmp))
         profile = cProfile.Profile()
+        threading.setprofile(profile_thread)
         profile.enable()
-        total = run_once(scene, seconds, "all", Path(tmp))
-        profile.disable()
-    stats = pstats.Stats(profile).stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
+        try:
+            total = run_once(scene, seconds, "all", Path(tmp))
+        finally:
+            profile.disable()
+            threading.setprofile(None)
+    merged = pstats.Stats(profile)
+    for p in thread_profiles:
+        merged.add(p)
+    stats = merged.stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
     out = {"run": total}
     for label, suffix, function in PARTS:
         out[label] = sum(v[3] for (file, _, name), v in stats.items()
@@ -175,17 +205,24 @@ def render_section(r: dict) -> str:
         "- The CSV holds every value as Python's `repr` writes it (the shortest text that reads "
         "back to the same double), formatted by compiled code (Ryu's shortest digits); the file "
         "is byte-identical to the one written row by row. MCAP messages are built a block of "
-        "ticks at a time from byte images of each topic and compressed per chunk (zstd), the "
-        "file byte-identical to the one written message by message (clocks aside); rerun "
-        "receives columns "
+        "ticks at a time from byte images of each topic and compressed per chunk (zstd level -3), "
+        "the records those of the file written message by message; rerun receives columns "
         "(`send_columns`) every 5000 ticks.",
+        "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
+        "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
+        "blocks in a thread of their own (opening their files there too), so on two cores the "
+        "logs are written while the next blocks are computed. The wall time then depends on "
+        "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
+        f"physics (load average when measured: {r.get('load', 'not recorded')}).",
     ]
     if "parts_s" in r:
         parts = r["parts_s"]
         lines += [
             "",
-            f"Where the time of one run with all logs goes, under `cProfile` ({1e3 * parts['run']:.0f}"
-            " ms; profiling slows small calls most, so read shares, not times):",
+            f"Where the time of one run with all logs goes, under `cProfile` in every thread "
+            f"({1e3 * parts['run']:.0f} ms of wall time; a part is the time its thread spent in "
+            "it, threads run beside each other so the parts add up to more than the run; "
+            "profiling slows small calls most, so read shares, not times):",
             "",
             "| part | ms | share of the run |",
             "|---|---|---|",
@@ -216,7 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(r))
         return 0
-    print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds")
+    print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds; "
+          f"load {r['load']}")
     print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
     for c in CONFIGS:
         print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
