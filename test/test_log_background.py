@@ -116,6 +116,28 @@ def test_all_started_once_every_start_returned():
     fan.close()
 
 
+def test_when_a_thread_cannot_be_started_the_others_finish_and_nothing_is_left(monkeypatch):
+    finished, interval = [], sys.getswitchinterval()
+    real_start, calls = threading.Thread.start, []
+
+    def start(thread):
+        calls.append(thread.name)
+        if len(calls) == 2:
+            raise RuntimeError("can't start new thread")
+        real_start(thread)
+
+    monkeypatch.setattr(threading.Thread, "start", start)
+    consumers = [Consumer("first", lambda b: None, lambda: finished.append("first"), lambda: None),
+                 Consumer("second", lambda b: None, lambda: finished.append("second"))]
+    with pytest.raises(RuntimeError, match="can't start"):
+        BlockFanOut(Box, consumers)
+    monkeypatch.undo()
+    for thread in threading.enumerate():
+        if thread.name == "first":
+            thread.join(timeout=60)  # a hang guard: the thread ends at once
+    assert finished == ["first"] and sys.getswitchinterval() == interval
+
+
 def test_consumers_run_in_threads_of_their_own():
     names = set()
     with BlockFanOut(Box, [Consumer("vjm-x", lambda b: names.add(

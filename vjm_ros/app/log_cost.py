@@ -85,7 +85,7 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
         "rounds": rounds,
         "ms_per_sim_s": {c: 1e3 * best[c] / seconds for c in CONFIGS},
         "ratio": {c: best[c] / physics for c in CONFIGS},
-        "load": f"{load_before} before, {_load_average()} after (1-minute load average)",
+        "load": f"{load_before} before, {_load_average()} after",
     }
 
 
@@ -110,7 +110,7 @@ PARTS = (
     ("mcap: finalize file", "logs/mcap_recorder.py", "_finalize"),
     ("rrd: open", "logs/rerun_recorder.py", "__init__"),
     ("rrd: buffer blocks", "logs/rerun_recorder.py", "write_block"),
-    ("rrd:   of which send_columns", "logs/rerun_recorder.py", "send"),
+    ("rrd: send columns (also at finalize)", "logs/rerun_recorder.py", "send"),
     ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
 )
 """Parts of the *all* run: label, file (path suffix; ``~`` for a built-in) and function whose
@@ -213,7 +213,7 @@ def render_section(r: dict) -> str:
         "blocks in a thread of their own (opening their files there too), so on two cores the "
         "logs are written while the next blocks are computed. The wall time then depends on "
         "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
-        f"physics (load average when measured: {r.get('load', 'not recorded')}).",
+        f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}).",
     ]
     if "parts_s" in r:
         parts = r["parts_s"]
@@ -254,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(r))
         return 0
     print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds; "
-          f"load {r['load']}")
+          f"1-minute load average {r['load']}")
     print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
     for c in CONFIGS:
         print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
@@ -263,7 +263,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nparts of one run with all logs, profiled ({1e3 * parts['run']:.0f} ms):")
         for label, _, _ in PARTS:
             share = parts[label] / parts["run"]
-            print(f"{label:30s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
+            print(f"{label:38s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
     return 0
 
 

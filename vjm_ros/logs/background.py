@@ -107,8 +107,19 @@ class BlockFanOut:
             threading.Thread(target=self._serve, args=(c, q), name=c.name, daemon=True)
             for c, q in zip(consumers, self._queues, strict=True)
         ]
-        for thread in self._threads:
-            thread.start()
+        running = 0
+        try:
+            for thread in self._threads:
+                thread.start()
+                running += 1
+        except BaseException:  # no thread to be had: the others stop, nothing is written
+            self._start_failed = True
+            for _ in self._threads[running:]:
+                self._count_start()
+            for q in self._queues[:running]:
+                q.put(_STOP)
+            sys.setswitchinterval(self._interval)
+            raise
 
     @property
     def start_failed(self) -> bool:
@@ -200,11 +211,15 @@ class BlockFanOut:
                 started = False
                 self._start_failed = True
                 self._errors.append(exc)
+        self._count_start()
+        return started
+
+    def _count_start(self) -> None:
+        """One consumer's ``start`` has returned (or will never run)."""
         with self._lock:
             self._starts_left -= 1
             if self._starts_left == 0:
                 self._starts_done.set()
-        return started
 
     def _release(self, block) -> None:
         with self._lock:
