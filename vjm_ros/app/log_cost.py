@@ -66,10 +66,12 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
     -------
     dict
         ``ms_per_sim_s`` and ``ratio`` (to the physics-only run) per configuration of
-        :data:`CONFIGS`, with the scene, the simulated seconds, the rounds and the machine's
-        ``load`` average before and after.
+        :data:`CONFIGS`, ``cpu_ms_per_sim_s`` (the least CPU time of the process, all its
+        threads, over the rounds), with the scene, the simulated seconds, the rounds and the
+        machine's ``load`` average before and after.
     """
     best = dict.fromkeys(CONFIGS, float("inf"))
+    cpu = dict.fromkeys(CONFIGS, float("inf"))
     load_before = _load_average()
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
         folder = Path(tmp)
@@ -77,7 +79,9 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
             run_once(scene, min(seconds, 0.5), config, folder)
         for _ in range(rounds):
             for config in CONFIGS:
+                cpu0 = time.process_time()
                 best[config] = min(best[config], run_once(scene, seconds, config, folder))
+                cpu[config] = min(cpu[config], time.process_time() - cpu0)
     physics = best["physics"]
     return {
         "scene": scene,
@@ -85,6 +89,7 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
         "rounds": rounds,
         "ms_per_sim_s": {c: 1e3 * best[c] / seconds for c in CONFIGS},
         "ratio": {c: best[c] / physics for c in CONFIGS},
+        "cpu_ms_per_sim_s": {c: 1e3 * cpu[c] / seconds for c in CONFIGS},
         "load": f"{load_before} before, {_load_average()} after",
     }
 
@@ -121,9 +126,10 @@ def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float
     """Seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile` in every thread.
 
     The physics runs in the calling thread and each output in a thread of its own, beside it:
-    a part is the time of its thread spent in it, and the parts add up to more than the run's
-    wall time (``"run"``) where threads ran at once. Profiling slows calls down, the more the
-    smaller they are: read the parts as shares, not as absolute times.
+    a part is the time its thread spent in it, waiting for the GIL or for a core included, set
+    against the run's wall time (``"run"``); the parts add up to more than the run where threads
+    ran at once. Profiling slows calls down, the more the smaller they are, and makes every
+    thread hold the GIL more: read the parts as shares, not as absolute times.
     """
     import cProfile
     import pstats
@@ -190,12 +196,14 @@ def render_section(r: dict) -> str:
         "loading of compiled code and libraries (done once before). Only the ratios are "
         "meaningful, the machine is shared.",
         "",
-        "| run | ms per sim s | / physics only |",
-        "|---|---|---|",
+        "| run | ms per sim s | / physics only | CPU ms per sim s (all threads) |",
+        "|---|---|---|---|",
     ]
     names = {"physics": "physics only", "+csv": "`--out` (CSV, summary)", "+mcap": "`--mcap`",
              "+rrd": "`--rrd`", "all": "`--out --mcap --rrd`"}
-    lines += [f"| {names[c]} | {ms[c]:.3g} | {ratio[c]:.2f} |" for c in CONFIGS]
+    cpu = r.get("cpu_ms_per_sim_s", {})
+    lines += [f"| {names[c]} | {ms[c]:.3g} | {ratio[c]:.2f} | {cpu.get(c, float('nan')):.3g} |"
+              for c in CONFIGS]
     lines += [
         "",
         f"- **All three logs**: {ratio['all']:.2f}x the physics-only run; target "
@@ -213,7 +221,11 @@ def render_section(r: dict) -> str:
         "blocks in a thread of their own (opening their files there too), so on two cores the "
         "logs are written while the next blocks are computed. The wall time then depends on "
         "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
-        f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}).",
+        f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}). "
+        "On two free cores a run takes at least half its CPU time: with all three logs "
+        f"{cpu.get('all', float('nan')) / 2:.3g} ms per simulated s (half of "
+        f"{cpu.get('all', float('nan')):.3g}), where the target allows "
+        f"{TARGET * ms['physics']:.3g}.",
     ]
     if "parts_s" in r:
         parts = r["parts_s"]
@@ -221,10 +233,11 @@ def render_section(r: dict) -> str:
             "",
             f"Where the time of one run with all logs goes, under `cProfile` in every thread "
             f"({1e3 * parts['run']:.0f} ms of wall time; a part is the time its thread spent in "
-            "it, threads run beside each other so the parts add up to more than the run; "
-            "profiling slows small calls most, so read shares, not times):",
+            "it, waiting for the GIL or a core included; threads run beside each other, so the "
+            "parts add up to more than the run; profiling slows small calls most and makes "
+            "threads wait for each other more, so read shares, not times):",
             "",
-            "| part | ms | share of the run |",
+            "| part | ms | share of the run's wall time |",
             "|---|---|---|",
         ]
         lines += [f"| {label.strip()} | {1e3 * parts[label]:.1f} | "
@@ -255,12 +268,14 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds; "
           f"1-minute load average {r['load']}")
-    print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
+    print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s} {'CPU ms per sim s':>17s}")
     for c in CONFIGS:
-        print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
+        print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f} "
+              f"{r['cpu_ms_per_sim_s'][c]:17.2f}")
     if args.parts:
         parts = r["parts_s"]
-        print(f"\nparts of one run with all logs, profiled ({1e3 * parts['run']:.0f} ms):")
+        print(f"\nparts of one run with all logs, profiled in every thread "
+              f"({1e3 * parts['run']:.0f} ms of wall time):")
         for label, _, _ in PARTS:
             share = parts[label] / parts["run"]
             print(f"{label:38s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
