@@ -138,6 +138,23 @@ def test_when_a_thread_cannot_be_started_the_others_finish_and_nothing_is_left(m
     assert finished == ["first"] and sys.getswitchinterval() == interval
 
 
+def test_in_the_calling_thread_consumers_see_the_same_blocks(monkeypatch):
+    from vjm_ros.logs import background
+
+    monkeypatch.setattr(background, "IN_CALLING_THREAD", True)
+    seen, events = [], []
+    consumers = [Consumer("a", lambda b: seen.append((threading.current_thread().name, b.value)),
+                          lambda: events.append("finish"), lambda: events.append("start"))]
+    with BlockFanOut(Box, consumers, depth=2) as fan:
+        assert fan.all_started
+        for i in range(5):
+            block = fan.take()
+            block.value = i
+            fan.put(block)
+    assert seen == [(threading.current_thread().name, i) for i in range(5)]
+    assert events == ["start", "finish"]
+
+
 def test_consumers_run_in_threads_of_their_own():
     names = set()
     with BlockFanOut(Box, [Consumer("vjm-x", lambda b: names.add(

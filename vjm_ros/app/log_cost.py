@@ -119,42 +119,36 @@ PARTS = (
     ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
 )
 """Parts of the *all* run: label, file (path suffix; ``~`` for a built-in) and function whose
-cumulative time it is, summed over the threads that ran it."""
+cumulative time it is."""
 
 
 def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float]:
-    """Seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile` in every thread.
+    """Seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile`, with the
+    outputs written in the calling thread after each block
+    (:data:`vjm_ros.logs.background.IN_CALLING_THREAD`).
 
-    The physics runs in the calling thread and each output in a thread of its own, beside it:
-    a part is the time its thread spent in it, waiting for the GIL or for a core included, set
-    against the run's wall time (``"run"``); the parts add up to more than the run where threads
-    ran at once. Profiling slows calls down, the more the smaller they are, and makes every
-    thread hold the GIL more: read the parts as shares, not as absolute times.
+    In ``vjm run`` each output works in a thread of its own; run one after the other in one
+    thread, a profile shows what each part costs without the waits of threads for the GIL or
+    a core. ``"run"`` is that run's wall time: the sum of the physics and of every output.
+    Profiling slows calls down, the more the smaller they are: read the parts as shares, not
+    as absolute times.
     """
     import cProfile
     import pstats
-    import threading
 
-    thread_profiles: list[cProfile.Profile] = []
-
-    def profile_thread(frame, event, arg) -> None:  # the first event of each new thread
-        thread_profiles.append(cProfile.Profile())
-        thread_profiles[-1].enable()
+    from vjm_ros.logs import background
 
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
-        run_once(scene, min(seconds, 0.5), "all", Path(tmp))
-        profile = cProfile.Profile()
-        threading.setprofile(profile_thread)
-        profile.enable()
+        background.IN_CALLING_THREAD = True
         try:
+            run_once(scene, min(seconds, 0.5), "all", Path(tmp))
+            profile = cProfile.Profile()
+            profile.enable()
             total = run_once(scene, seconds, "all", Path(tmp))
-        finally:
             profile.disable()
-            threading.setprofile(None)
-    merged = pstats.Stats(profile)
-    for p in thread_profiles:
-        merged.add(p)
-    stats = merged.stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
+        finally:
+            background.IN_CALLING_THREAD = False
+    stats = pstats.Stats(profile).stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
     out = {"run": total}
     for label, suffix, function in PARTS:
         out[label] = sum(v[3] for (file, _, name), v in stats.items()
@@ -231,13 +225,13 @@ def render_section(r: dict) -> str:
         parts = r["parts_s"]
         lines += [
             "",
-            f"Where the time of one run with all logs goes, under `cProfile` in every thread "
-            f"({1e3 * parts['run']:.0f} ms of wall time; a part is the time its thread spent in "
-            "it, waiting for the GIL or a core included; threads run beside each other, so the "
-            "parts add up to more than the run; profiling slows small calls most and makes "
-            "threads wait for each other more, so read shares, not times):",
+            "Where the time of one run with all logs goes, under `cProfile`, with the outputs "
+            "written one after the other in the thread of the physics (in `vjm run` they work "
+            "in threads of their own; here each part's cost shows without waits) "
+            f"({1e3 * parts['run']:.0f} ms; profiling slows small calls most, so read shares, "
+            "not times):",
             "",
-            "| part | ms | share of the run's wall time |",
+            "| part | ms | share of the run |",
             "|---|---|---|",
         ]
         lines += [f"| {label.strip()} | {1e3 * parts[label]:.1f} | "
@@ -274,8 +268,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{r['cpu_ms_per_sim_s'][c]:17.2f}")
     if args.parts:
         parts = r["parts_s"]
-        print(f"\nparts of one run with all logs, profiled in every thread "
-              f"({1e3 * parts['run']:.0f} ms of wall time):")
+        print(f"\nparts of one run with all logs, profiled, outputs written in the thread of "
+              f"the physics ({1e3 * parts['run']:.0f} ms):")
         for label, _, _ in PARTS:
             share = parts[label] / parts["run"]
             print(f"{label:38s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")

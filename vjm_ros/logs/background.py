@@ -67,6 +67,11 @@ class Consumer:
 
 _STOP = object()
 
+IN_CALLING_THREAD = False
+"""Run the consumers in the calling thread, one after the other, at :meth:`BlockFanOut.put`
+(for profiling their cost without threads waiting for each other; see
+:func:`vjm_ros.app.log_cost.breakdown`)."""
+
 
 class BlockFanOut:
     """Hands filled blocks to consumers, each in a thread of its own (see the module notes).
@@ -102,6 +107,10 @@ class BlockFanOut:
         if not consumers:
             self._starts_done.set()
         self._start_failed = False
+        if IN_CALLING_THREAD:
+            self._queues = [_InCallingThread(self, c) for c in consumers]
+            self._threads = []
+            return
         self._queues = [queue.SimpleQueue() for _ in consumers]
         self._threads = [
             threading.Thread(target=self._serve, args=(c, q), name=c.name, daemon=True)
@@ -188,14 +197,22 @@ class BlockFanOut:
             block = blocks.get()
             if block is _STOP:
                 break
-            if not failed:
-                try:
-                    consumer.write(block)
-                except BaseException as exc:  # noqa: BLE001 - raised again in the caller
-                    failed = True
-                    self._errors.append(exc)
+            failed = failed or not self._write(consumer, block)
             self._release(block)
-        if started and consumer.finish is not None:
+        if started:
+            self._finish(consumer)
+
+    def _write(self, consumer: Consumer, block) -> bool:
+        """Hand ``block`` to the consumer; whether it took it without raising."""
+        try:
+            consumer.write(block)
+        except BaseException as exc:  # noqa: BLE001 - raised again in the caller
+            self._errors.append(exc)
+            return False
+        return True
+
+    def _finish(self, consumer: Consumer) -> None:
+        if consumer.finish is not None:
             try:
                 consumer.finish()
             except BaseException as exc:  # noqa: BLE001 - raised again in the caller
@@ -234,3 +251,22 @@ class BlockFanOut:
         if self._errors and not self._raised:
             self._raised = True
             raise self._errors[0]
+
+
+class _InCallingThread:
+    """A consumer's thread and queue in one, when :data:`IN_CALLING_THREAD`: the consumer
+    starts at once and takes each block when it is put."""
+
+    def __init__(self, fan: BlockFanOut, consumer: Consumer):
+        self.fan = fan
+        self.consumer = consumer
+        self.started = fan._start(consumer)
+        self.failed = not self.started
+
+    def put(self, block) -> None:
+        if block is _STOP:
+            if self.started:
+                self.fan._finish(self.consumer)
+            return
+        self.failed = self.failed or not self.fan._write(self.consumer, block)
+        self.fan._release(block)
