@@ -145,7 +145,7 @@ class BlockFanOut:
         self._starts_done.wait()
         return self.all_started
 
-    def take(self):
+    def take(self) -> object:
         """A block to fill: a new one while fewer than ``depth`` exist, else the next one the
         consumers give back (waits for it)."""
         try:
