@@ -38,10 +38,12 @@ NODE_CODES = {signal.SIGINT: {0, -signal.SIGINT}, signal.SIGTERM: {0, -signal.SI
 
 def command(kind, mcap, rrd):
     if kind == "cli":
-        # 300 simulated s: far longer than the latest signal on any machine (30 s took 3 s here,
-        # so a shorter run could end before its signal and exit 0)
-        return [sys.executable, "-m", "vjm_ros.app.cli", "run", "six_bar", "--duration", "300",
-                "--mcap", str(mcap), "--rrd", str(rrd)]
+        # 600 simulated s with 10 steps per tick: far longer than the latest signal on any
+        # machine (about 10 s of physics here; with one step per tick, 300 s took 1.3 s with
+        # both logs, and a run that ends before its signal exits 0); the logs are written per
+        # tick, so they grow no faster than before
+        return [sys.executable, "-m", "vjm_ros.app.cli", "run", "six_bar", "--duration", "600",
+                "--substeps", "10", "--mcap", str(mcap), "--rrd", str(rrd)]
     return [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args", "-p", "scene:=six_bar",
             "-p", "duration:=30.0", "-p", f"mcap:={mcap}", "-p", f"rrd:={rrd}"]
 

@@ -66,16 +66,22 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
     -------
     dict
         ``ms_per_sim_s`` and ``ratio`` (to the physics-only run) per configuration of
-        :data:`CONFIGS`, with the scene, the simulated seconds and the rounds.
+        :data:`CONFIGS`, ``cpu_ms_per_sim_s`` (the least CPU time of the process, all its
+        threads, over the rounds), with the scene, the simulated seconds, the rounds and the
+        machine's ``load`` average before and after.
     """
     best = dict.fromkeys(CONFIGS, float("inf"))
+    cpu = dict.fromkeys(CONFIGS, float("inf"))
+    load_before = _load_average()
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
         folder = Path(tmp)
         for config in CONFIGS:  # warm-up: compiled code, log libraries
             run_once(scene, min(seconds, 0.5), config, folder)
         for _ in range(rounds):
             for config in CONFIGS:
+                cpu0 = time.process_time()
                 best[config] = min(best[config], run_once(scene, seconds, config, folder))
+                cpu[config] = min(cpu[config], time.process_time() - cpu0)
     physics = best["physics"]
     return {
         "scene": scene,
@@ -83,41 +89,65 @@ def measure(scene: str = "four_bar", seconds: float = 10.0, rounds: int = 5) -> 
         "rounds": rounds,
         "ms_per_sim_s": {c: 1e3 * best[c] / seconds for c in CONFIGS},
         "ratio": {c: best[c] / physics for c in CONFIGS},
+        "cpu_ms_per_sim_s": {c: 1e3 * cpu[c] / seconds for c in CONFIGS},
+        "load": f"{load_before} before, {_load_average()} after",
     }
+
+
+def _load_average() -> str:
+    """The machine's 1-minute load average (what else ran on it), or ``"unknown"``."""
+    try:
+        return f"{os.getloadavg()[0]:.2f}"
+    except (AttributeError, OSError):
+        return "unknown"
 
 
 PARTS = (
     ("physics (advance_block)", "sim/simulator.py", "advance_block"),
-    ("csv: trajectory.csv", "sim/trajectory.py", "write_csv"),
+    ("trajectory: extend", "sim/trajectory.py", "extend"),
+    ("csv: trajectory.csv", "sim/trajectory.py", "catch_up"),
     ("mcap: open", "logs/mcap_recorder.py", "__init__"),
     ("mcap: encode blocks", "logs/mcap_block.py", "encode"),
     ("mcap: add records, index", "logs/mcap_block.py", "add_records"),
-    ("mcap: close chunks", "mcap/writer.py", "__finalize_chunk"),
-    ("mcap:   of which zstd", "zstandard/__init__.py", "compress"),
+    ("mcap: close chunks", "logs/mcap_block.py", "_Writer__finalize_chunk"),
+    ("mcap:   of which zstd", "~",
+     "<method 'compress' of 'zstandard.backend_c.ZstdCompressor' objects>"),
     ("mcap: finalize file", "logs/mcap_recorder.py", "_finalize"),
     ("rrd: open", "logs/rerun_recorder.py", "__init__"),
     ("rrd: buffer blocks", "logs/rerun_recorder.py", "write_block"),
-    ("rrd:   of which send_columns", "logs/rerun_recorder.py", "send"),
+    ("rrd: send columns (also at finalize)", "logs/rerun_recorder.py", "send"),
     ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
 )
-"""Parts of the *all* run: label, file (path suffix) and function whose cumulative time it is."""
+"""Parts of the *all* run: label, file (path suffix; ``~`` for a built-in) and function whose
+cumulative time it is."""
 
 
 def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float]:
-    """Wall seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile`.
+    """Seconds per part (:data:`PARTS`) of one *all* run, under :mod:`cProfile`, with the
+    outputs written in the calling thread after each block
+    (:data:`vjm_ros.logs.background.IN_CALLING_THREAD`).
 
-    Profiling slows calls down, the more the smaller they are: read the parts as shares of the
-    profiled run (``"run"``), not as absolute times.
+    In ``vjm run`` each output works in a thread of its own; run one after the other in one
+    thread, a profile shows what each part costs without the waits of threads for the GIL or
+    a core. ``"run"`` is that run's wall time: the sum of the physics and of every output.
+    Profiling slows calls down, the more the smaller they are: read the parts as shares, not
+    as absolute times.
     """
     import cProfile
     import pstats
 
+    from vjm_ros.logs import background
+
     with tempfile.TemporaryDirectory(prefix="vjm_log_cost_") as tmp:
-        run_once(scene, min(seconds, 0.5), "all", Path(tmp))
-        profile = cProfile.Profile()
-        profile.enable()
-        total = run_once(scene, seconds, "all", Path(tmp))
-        profile.disable()
+        background.IN_CALLING_THREAD = True
+        try:
+            run_once(scene, min(seconds, 0.5), "all", Path(tmp))
+            profile = cProfile.Profile()
+            profile.enable()
+            total = run_once(scene, seconds, "all", Path(tmp))
+            profile.disable()
+        finally:
+            background.IN_CALLING_THREAD = False
     stats = pstats.Stats(profile).stats  # (file, line, function) -> (cc, nc, tt, ct, callers)
     out = {"run": total}
     for label, suffix, function in PARTS:
@@ -155,17 +185,19 @@ def render_section(r: dict) -> str:
         f"`vjm run {r['scene']}` with rk4 at 1 kHz and exact closure for {r['seconds']:g} "
         "simulated seconds, in one process, without and with each log; every configuration "
         f"runs {r['rounds']} times, interleaved with the others, and the best wall time counts: "
-        "the whole run (scene, logs opened, ticks in blocks of 200, logs finalized, "
+        "the whole run (scene, logs opened, ticks in blocks of 1000, logs finalized, "
         "`trajectory.csv` and `summary.json` written), not the interpreter's start-up or the "
         "loading of compiled code and libraries (done once before). Only the ratios are "
         "meaningful, the machine is shared.",
         "",
-        "| run | ms per sim s | / physics only |",
-        "|---|---|---|",
+        "| run | ms per sim s | / physics only | CPU ms per sim s (all threads) |",
+        "|---|---|---|---|",
     ]
     names = {"physics": "physics only", "+csv": "`--out` (CSV, summary)", "+mcap": "`--mcap`",
              "+rrd": "`--rrd`", "all": "`--out --mcap --rrd`"}
-    lines += [f"| {names[c]} | {ms[c]:.3g} | {ratio[c]:.2f} |" for c in CONFIGS]
+    cpu = r.get("cpu_ms_per_sim_s", {})
+    lines += [f"| {names[c]} | {ms[c]:.3g} | {ratio[c]:.2f} | {cpu.get(c, float('nan')):.3g} |"
+              for c in CONFIGS]
     lines += [
         "",
         f"- **All three logs**: {ratio['all']:.2f}x the physics-only run; target "
@@ -175,17 +207,29 @@ def render_section(r: dict) -> str:
         "- The CSV holds every value as Python's `repr` writes it (the shortest text that reads "
         "back to the same double), formatted by compiled code (Ryu's shortest digits); the file "
         "is byte-identical to the one written row by row. MCAP messages are built a block of "
-        "ticks at a time from byte images of each topic and compressed per chunk (zstd), the "
-        "file byte-identical to the one written message by message (clocks aside); rerun "
-        "receives columns "
+        "ticks at a time from byte images of each topic and compressed per chunk (zstd level -3), "
+        "the records those of the file written message by message; rerun receives columns "
         "(`send_columns`) every 5000 ticks.",
+        "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
+        "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
+        "blocks in a thread of their own (opening their files there too), so on two cores the "
+        "logs are written while the next blocks are computed. The wall time then depends on "
+        "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
+        f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}). "
+        "On two free cores a run takes at least half its CPU time: with all three logs "
+        f"{cpu.get('all', float('nan')) / 2:.3g} ms per simulated s (half of "
+        f"{cpu.get('all', float('nan')):.3g}), where the target allows "
+        f"{TARGET * ms['physics']:.3g}.",
     ]
     if "parts_s" in r:
         parts = r["parts_s"]
         lines += [
             "",
-            f"Where the time of one run with all logs goes, under `cProfile` ({1e3 * parts['run']:.0f}"
-            " ms; profiling slows small calls most, so read shares, not times):",
+            "Where the time of one run with all logs goes, under `cProfile`, with the outputs "
+            "written one after the other in the thread of the physics (in `vjm run` they work "
+            "in threads of their own; here each part's cost shows without waits) "
+            f"({1e3 * parts['run']:.0f} ms; profiling slows small calls most, so read shares, "
+            "not times):",
             "",
             "| part | ms | share of the run |",
             "|---|---|---|",
@@ -216,16 +260,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(r))
         return 0
-    print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds")
-    print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s}")
+    print(f"{r['scene']}, rk4 1 kHz exact, {r['seconds']:g} s, best of {r['rounds']} rounds; "
+          f"1-minute load average {r['load']}")
+    print(f"{'run':10s} {'ms per sim s':>13s} {'/ physics':>10s} {'CPU ms per sim s':>17s}")
     for c in CONFIGS:
-        print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f}")
+        print(f"{c:10s} {r['ms_per_sim_s'][c]:13.2f} {r['ratio'][c]:10.2f} "
+              f"{r['cpu_ms_per_sim_s'][c]:17.2f}")
     if args.parts:
         parts = r["parts_s"]
-        print(f"\nparts of one run with all logs, profiled ({1e3 * parts['run']:.0f} ms):")
+        print(f"\nparts of one run with all logs, profiled, outputs written in the thread of "
+              f"the physics ({1e3 * parts['run']:.0f} ms):")
         for label, _, _ in PARTS:
             share = parts[label] / parts["run"]
-            print(f"{label:30s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
+            print(f"{label:38s} {1e3 * parts[label]:8.1f} ms {100 * share:6.1f} %")
     return 0
 
 

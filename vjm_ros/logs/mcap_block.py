@@ -15,13 +15,15 @@ are those the writer keeps for messages added one by one.
 from __future__ import annotations
 
 import struct
+import zlib
 from collections.abc import Sequence
 
 import numpy as np
+import zstandard
 from mcap._chunk_builder import ChunkBuilder
 from mcap.opcode import Opcode
-from mcap.records import Message
-from mcap.writer import Writer
+from mcap.records import Chunk, ChunkIndex, Message
+from mcap.writer import CompressionType, IndexType, Writer
 
 from vjm_ros.logs import cdr, messages
 
@@ -67,7 +69,8 @@ class BlockChunkBuilder(ChunkBuilder):
 
     def add_records(self, data, groups: Sequence[tuple]) -> None:
         """Append Message records ``data`` (bytes); ``groups`` holds ``(channel id, log times
-        (ns), offsets into data (bytes))`` per channel, channels in order of first appearance."""
+        (ns, never decreasing), offsets into data (bytes))`` per channel, channels in order of
+        first appearance."""
         base = self.record_writer.count
         self.record_writer.write(data)
         self._note([(channel, times, offsets + base) for channel, times, offsets in groups])
@@ -76,7 +79,7 @@ class BlockChunkBuilder(ChunkBuilder):
         for channel, times, offsets in groups:
             if len(times) == 0:
                 continue
-            lo, hi = int(times.min()), int(times.max())
+            lo, hi = int(times[0]), int(times[-1])  # log times never decrease
             self.message_start_time = lo if self.num_messages == 0 else min(
                 self.message_start_time, lo)
             self.message_end_time = max(self.message_end_time, hi)
@@ -87,18 +90,30 @@ class BlockChunkBuilder(ChunkBuilder):
             index.add(times, offsets)
 
 
+ZSTD_LEVEL = -3
+"""zstd level of the chunks: the C++ ``mcap`` writer's ``CompressionLevel::Fast`` (rosbag2's
+MCAP storage writes level 1, its ``Default``, unless a preset asks for another). On the
+four-bar's 10 s log (40 chunks, 7.3 MB before compression) the chunks compress in 3.4 ms against
+5.0 ms at level 1 and 7.0 ms at the Python writer's level 3, and come to 1.37 MB against 1.28 MB
+and 1.36 MB (the file: 2.2 MB with its indexes, 4 % more than at level 1). Every zstd reader
+decompresses any level."""
+
+
 class BlockWriter(Writer):
-    """``mcap.writer.Writer`` that also takes runs of Message records (:meth:`add_records`).
+    """``mcap.writer.Writer`` that also takes runs of Message records (:meth:`add_records`) and
+    compresses chunks with zstd at ``zstd_level`` (a compressor kept for the whole file).
 
     Reaches into the writer's private statistics and chunk state (``mcap`` 1.6.0, pinned in
     ``requirements/lock.txt``); the logs it writes are read back by rosbags and the ``mcap``
-    reader in the tests.
+    reader in the tests, and at the writer's own level (3) the file is the writer's, byte for
+    byte (test/test_mcap_compression.py).
     """
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, zstd_level: int = ZSTD_LEVEL, **kwargs):
         super().__init__(*args, **kwargs)
         self._builder = BlockChunkBuilder()
         self._Writer__chunk_builder = self._builder
+        self._zstd = zstandard.ZstdCompressor(level=zstd_level)
 
     def add_records(self, data, groups: Sequence[tuple]) -> None:
         """Add Message records to the open chunk (see :meth:`BlockChunkBuilder.add_records`);
@@ -107,7 +122,7 @@ class BlockWriter(Writer):
         for channel, times, _ in groups:
             if len(times) == 0:
                 continue
-            lo, hi = int(times.min()), int(times.max())
+            lo, hi = int(times[0]), int(times[-1])
             stats.message_start_time = lo if stats.message_count == 0 else min(
                 stats.message_start_time, lo)
             stats.message_end_time = max(stats.message_end_time, hi)
@@ -115,6 +130,58 @@ class BlockWriter(Writer):
             stats.message_count += len(times)
         self._builder.add_records(data, groups)
         self._Writer__maybe_finalize_chunk()
+
+    def _Writer__finalize_chunk(self) -> None:  # noqa: N802 - the writer's private name
+        """The writer's ``__finalize_chunk`` with zstd at :attr:`zstd_level`: the chunk record,
+        its chunk index and its message indexes, as the writer writes them."""
+        builder = self._builder
+        if builder.num_messages == 0:
+            return
+        self._Writer__statistics.chunk_count += 1
+        chunk_data = builder.end()
+        compression = self._Writer__compression
+        if compression == CompressionType.ZSTD:
+            name, compressed = "zstd", self._zstd.compress(chunk_data)
+        elif compression == CompressionType.LZ4:
+            import lz4.frame
+
+            name, compressed = "lz4", lz4.frame.compress(chunk_data)
+        else:
+            name, compressed = "", chunk_data
+        chunk = Chunk(
+            compression=name,
+            data=compressed,
+            message_start_time=builder.message_start_time,
+            message_end_time=builder.message_end_time,
+            uncompressed_crc=zlib.crc32(chunk_data) if self._Writer__enable_crcs else 0,
+            uncompressed_size=len(chunk_data),
+        )
+        records, stream = self._Writer__record_builder, self._Writer__stream
+        self._Writer__flush()
+        chunk_start_offset = stream.tell()
+        chunk.write(records)
+        chunk_index = ChunkIndex(
+            message_start_time=chunk.message_start_time,
+            message_end_time=chunk.message_end_time,
+            chunk_start_offset=chunk_start_offset,
+            chunk_length=records.count,
+            message_index_offsets={},
+            message_index_length=0,
+            compression=chunk.compression,
+            compressed_size=len(compressed),
+            uncompressed_size=chunk.uncompressed_size,
+        )
+        self._Writer__flush()
+        message_index_start_offset = stream.tell()
+        if self._Writer__index_types & IndexType.MESSAGE:
+            for channel, index in builder.message_indices.items():
+                chunk_index.message_index_offsets[channel] = (
+                    message_index_start_offset + records.count)
+                index.write(records)
+        chunk_index.message_index_length = records.count
+        self._Writer__flush()
+        self._Writer__chunk_indices.append(chunk_index)
+        builder.reset()
 
 
 # ---------------------------------------------------------------- records of a block

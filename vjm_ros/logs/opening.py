@@ -2,9 +2,65 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.core.model import Model
 from vjm_ros.logs.storage import check_log_path, is_file_target
+
+
+def recorder_openers(
+    model: Model,
+    settings: dict,
+    scene_text: str,
+    *,
+    mcap: str | None = None,
+    rrd: str | None = None,
+    duration: float = 0.0,
+    rate: float = 1000.0,
+    keys: tuple[str, str] = ("mcap", "rrd"),
+) -> list[tuple[str, Callable[[], object]]]:
+    """The storage checks of the logs asked for, then one function per log that opens it.
+
+    Parameters are those of :func:`open_recorders`.
+
+    Returns
+    -------
+    list of (str, callable)
+        The option or parameter naming the log (``keys[0]`` for the MCAP, first) and a function
+        without arguments that returns the open recorder, or raises :class:`ConfigurationError`
+        naming the key when the recorder is not available or the file cannot be opened. The
+        functions may run in other threads.
+
+    Raises
+    ------
+    ConfigurationError
+        A path fails the checks of :func:`~vjm_ros.logs.storage.check_log_path`.
+    """
+    wanted = [(keys[0], mcap, "McapRecorder"), (keys[1], rrd, "RerunRecorder")]
+    for key, path, _ in wanted:
+        if path and is_file_target(path):
+            check_log_path(path, key, duration, rate)
+    return [(key, functools.partial(_open, key, path, cls_name, model, settings, scene_text))
+            for key, path, cls_name in wanted if path]
+
+
+def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_text: str):
+    """One recorder, opened; a :class:`ConfigurationError` naming ``key`` if it cannot be."""
+    try:
+        from vjm_ros import logs
+
+        cls = getattr(logs, cls_name)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
+    args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
+        path, model, settings)
+    try:
+        return cls(*args)
+    except (OSError, RuntimeError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or exc
+        raise ConfigurationError(f"{key}: cannot open {path!r} ({reason})") from None
 
 
 def open_recorders(
@@ -48,28 +104,12 @@ def open_recorders(
         A recorder is not available, a path fails the checks of
         :func:`~vjm_ros.logs.storage.check_log_path`, or a file cannot be opened.
     """
-    wanted = [(keys[0], mcap, "McapRecorder"), (keys[1], rrd, "RerunRecorder")]
-    for key, path, _ in wanted:
-        if path and is_file_target(path):
-            check_log_path(path, key, duration, rate)
+    openers = recorder_openers(model, settings, scene_text, mcap=mcap, rrd=rrd,
+                               duration=duration, rate=rate, keys=keys)
     recorders: list = []
     try:
-        for key, path, cls_name in wanted:
-            if not path:
-                continue
-            try:
-                from vjm_ros import logs
-
-                cls = getattr(logs, cls_name)
-            except (ImportError, AttributeError) as exc:
-                raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
-            args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
-                path, model, settings)
-            try:
-                recorders.append(cls(*args))
-            except (OSError, RuntimeError, ValueError) as exc:
-                reason = getattr(exc, "strerror", None) or exc
-                raise ConfigurationError(f"{key}: cannot open {path!r} ({reason})") from None
+        for _, opener in openers:
+            recorders.append(opener())
     except ConfigurationError:
         for rec in recorders:
             rec.close()

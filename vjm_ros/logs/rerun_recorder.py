@@ -267,8 +267,8 @@ class RerunRecorder(Recorder):
         self._energy = np.zeros((b, 4))
         self._error = np.zeros((b, k))
         self._count = 0
-        self._geo: list[tuple] = []
-        self._cyc: list[tuple] = []
+        self._geo: list[tuple] = []  # (times, segments, points, closure points, forces)
+        self._cyc: list[tuple] = []  # (times, segments)
 
     # ------------------------------------------------------------------ writing
     @atomic
@@ -285,11 +285,10 @@ class RerunRecorder(Recorder):
         self._error[i] = sample.closure_error
         self._count = i + 1
         if self.samples % self.geometry_every == 0:
-            self._geo.append(
-                (ns, sample.segments, sample.points, sample.closure_points, sample.closure_force)
-            )
+            self._geo.append((np.array([ns]), sample.segments[None], sample.points[None],
+                              sample.closure_points[None], sample.closure_force[None]))
             if self.cyclograph_ns > 0 and ns >= self._next_cyclograph_ns:
-                self._cyc.append((ns, sample.segments))
+                self._cyc.append((np.array([ns]), sample.segments[None]))
                 self._next_cyclograph_ns = ns + self.cyclograph_ns
         self.samples += 1
         if self._count == self.batch or time.monotonic() - self._last_send >= self.batch_seconds:
@@ -331,14 +330,21 @@ class RerunRecorder(Recorder):
         blocks are refilled), and the chrono-cyclograph's poses among them; ``first`` is the
         number of samples written before the block."""
         start = rows.start + (-(first + rows.start) % self.geometry_every)
-        for i in range(start, rows.stop, self.geometry_every):
-            t = int(ns[i])
-            segments = block.segments[i].copy()
-            self._geo.append((t, segments, block.points[i].copy(), block.cpoints[i].copy(),
-                              block.force[i].copy()))
-            if self.cyclograph_ns > 0 and t >= self._next_cyclograph_ns:
-                self._cyc.append((t, segments))
-                self._next_cyclograph_ns = t + self.cyclograph_ns
+        kept = np.arange(start, rows.stop, self.geometry_every)
+        if len(kept) == 0:
+            return
+        times, segments = ns[kept], block.segments[kept]  # fancy indexing copies
+        self._geo.append((times, segments, block.points[kept], block.cpoints[kept],
+                          block.force[kept]))
+        if self.cyclograph_ns <= 0:
+            return
+        poses, at = [], int(np.searchsorted(times, self._next_cyclograph_ns))
+        while at < len(times):  # the first kept time at least a period after the last pose
+            poses.append(at)
+            self._next_cyclograph_ns = int(times[at]) + self.cyclograph_ns
+            at = int(np.searchsorted(times, self._next_cyclograph_ns))
+        if poses:
+            self._cyc.append((times[poses], segments[poses]))
 
     def send(self) -> None:
         """Send everything buffered so far."""
@@ -359,33 +365,33 @@ class RerunRecorder(Recorder):
         self._last_send = time.monotonic()
 
     def _send_geometry(self) -> None:
-        ns, seg, pts, cpts, cf = zip(*self._geo, strict=True)
+        ns, seg, pts, cpts, cf = (np.concatenate(part) for part in zip(*self._geo, strict=True))
         self._geo = []
         g = len(ns)
-        idx = [rr.TimeColumn(TIMELINE, duration=np.array(ns, dtype="timedelta64[ns]"))]
+        idx = [rr.TimeColumn(TIMELINE, duration=ns.astype("timedelta64[ns]"))]
         n = self.model.n
-        segments = np.concatenate(seg).reshape(g * n, 2, 2)
+        segments = seg.reshape(g * n, 2, 2)
         send = self.rec.send_columns
         send(f"{ROOT}/links", idx, rr.LineStrips2D.columns(strips=segments).partition([n] * g))
         joints = segments[:, 0, :]
         send(f"{ROOT}/joints", idx, rr.Points2D.columns(positions=joints).partition([n] * g))
         p = len(self.model.points)
         if p:
-            points = np.concatenate(pts).reshape(g * p, 2)
+            points = pts.reshape(g * p, 2)
             send(f"{ROOT}/points", idx, rr.Points2D.columns(positions=points).partition([p] * g))
             send(f"{ROOT}/traces", idx, rr.Points2D.columns(positions=points).partition([p] * g))
         k = len(self.model.closures)
         if k:
-            origins = np.concatenate(cpts).reshape(g * k, 2)
-            forces = np.concatenate(cf).reshape(g * k, 3)
+            origins = cpts.reshape(g * k, 2)
+            forces = cf.reshape(g * k, 3)
             vec = self._arrow_vectors(forces)
             cols = rr.Arrows2D.columns(origins=origins, vectors=vec).partition([k] * g)
             send(f"{ROOT}/forces", idx, cols)
         if self._cyc:
-            cns, cseg = zip(*self._cyc, strict=True)
+            cns, cseg = (np.concatenate(part) for part in zip(*self._cyc, strict=True))
             self._cyc = []
-            cidx = [rr.TimeColumn(TIMELINE, duration=np.array(cns, dtype="timedelta64[ns]"))]
-            strips = np.concatenate(cseg).reshape(len(cns) * n, 2, 2)
+            cidx = [rr.TimeColumn(TIMELINE, duration=cns.astype("timedelta64[ns]"))]
+            strips = cseg.reshape(len(cns) * n, 2, 2)
             cols = rr.LineStrips2D.columns(strips=strips).partition([n] * len(cns))
             send(f"{ROOT}/cyclograph", cidx, cols)
 

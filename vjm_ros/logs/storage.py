@@ -101,23 +101,36 @@ class LogWriters:
     def write(self, sample) -> None:
         """Write ``sample`` to every working recorder."""
         for rec in list(self.active):
-            try:
-                rec.write(sample)
-            except OSError as exc:
-                self._give_up(rec, exc)
+            self.write_to(rec, sample)
+
+    def write_to(self, rec, sample) -> None:
+        """:meth:`write` for one recorder (nothing if it was given up)."""
+        if rec not in self.active:
+            return
+        try:
+            rec.write(sample)
+        except OSError as exc:
+            self._give_up(rec, exc)
 
     def write_block(self, block) -> None:
         """Write every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` to every working
         recorder: in bulk where the recorder has ``write_block``, else sample by sample."""
         for rec in list(self.active):
-            try:
-                if hasattr(rec, "write_block"):
-                    rec.write_block(block)
-                else:
-                    for i in range(len(block)):
-                        rec.write(block.sample(i))
-            except OSError as exc:
-                self._give_up(rec, exc)
+            self.write_block_to(rec, block)
+
+    def write_block_to(self, rec, block) -> None:
+        """:meth:`write_block` for one recorder (nothing if it was given up). Recorders may be
+        written by threads of their own, one thread per recorder."""
+        if rec not in self.active:
+            return
+        try:
+            if hasattr(rec, "write_block"):
+                rec.write_block(block)
+            else:
+                for i in range(len(block)):
+                    rec.write(block.sample(i))
+        except OSError as exc:
+            self._give_up(rec, exc)
 
     def note_reset(self, t: float) -> None:
         """Tell every working recorder about a simulator reset at ``t`` (s)."""
@@ -140,13 +153,20 @@ class LogWriters:
     def close(self) -> None:
         """Close every working recorder (a failure to finalize counts as a failed log)."""
         for rec in list(self.active):
-            try:
-                rec.close()
-            except OSError as exc:
-                self.active.remove(rec)
-                text = exc.strerror or str(exc)
-                self.failed.append((_where(rec), text))
-                self._on_failure(_where(rec), text)
+            self.close_one(rec)
+
+    def close_one(self, rec) -> None:
+        """Close one working recorder (nothing if it was given up or closed); a failure to
+        finalize counts as a failed log."""
+        if rec not in self.active:
+            return
+        try:
+            rec.close()
+        except OSError as exc:
+            self.active.remove(rec)
+            text = exc.strerror or str(exc)
+            self.failed.append((_where(rec), text))
+            self._on_failure(_where(rec), text)
 
 
 def _where(rec) -> str:

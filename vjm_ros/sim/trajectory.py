@@ -168,24 +168,29 @@ class Trajectory:
         cols += [f"energy.{e}" for e in ENERGY_NAMES] + ["closure_error"]
         return cols
 
-    def table(self) -> np.ndarray:
-        """All columns as one array.
+    def table(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The columns of rows ``start .. stop - 1`` (all rows by default) as one array.
 
         Returns
         -------
-        ndarray, shape (rows, len(columns()))
+        ndarray, shape (stop - start, len(columns()))
         """
-        m, rows = self.model, len(self)
-        parts = [self["t"][:, None]]
-        per_joint = np.stack((self["q"], self["qd"], self["qdd"], self["effort"]), axis=2)
-        parts.append(per_joint.reshape(rows, -1))
-        parts.append(self["theta"])
-        parts.append(self["points"].reshape(rows, -1))
+        m = self.model
+        rows = slice(start, len(self) if stop is None else stop)
+        t, q, qd = self["t"][rows], self["q"][rows], self["qd"][rows]
+        count = len(t)
+        parts = [t[:, None]]
+        per_joint = np.stack((q, qd, self["qdd"][rows], self["effort"][rows]), axis=2)
+        parts.append(per_joint.reshape(count, -1))
+        parts.append(self["theta"][rows])
+        parts.append(self["points"][rows].reshape(count, -1))
+        force = self["force"][rows]
         for k, c in enumerate(m.closures):
-            f = self["force"][:, k]
+            f = force[:, k]
             parts.append(f[:, 2:3] if c.kind == ANGLE else f[:, :2])
-        parts.append(self["energy"])
-        parts.append(self.closure_error()[:, None])
+        parts.append(self["energy"][rows])
+        err = self["error"][rows]
+        parts.append((err.max(axis=1) if err.shape[1] else np.zeros(count))[:, None])
         return np.concatenate(parts, axis=1)
 
     def write_csv(self, path: str | Path) -> Path:
@@ -196,13 +201,59 @@ class Trajectory:
         in batches of :data:`CSV_BATCH_ROWS` rows (:func:`csv_rows`), the same text as a row-by-row
         :mod:`csv` writer (test/test_trajectory_csv.py).
         """
-        path = Path(path)
-        with path.open("w", newline="") as fh:
-            csv.writer(fh).writerow(self.columns())
-            table = self.table()
-            for start in range(0, len(table), CSV_BATCH_ROWS):
-                fh.write(csv_rows(table[start : start + CSV_BATCH_ROWS]))
-        return path
+        with CsvStream(self, path) as stream:
+            stream.catch_up()
+        return Path(path)
+
+
+class CsvStream:
+    """``trajectory.csv`` written while the trajectory grows: the header at once, then the rows
+    stored since the last :meth:`catch_up` at each call; the file is the one
+    :meth:`Trajectory.write_csv` writes at the end.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        Read only by :meth:`catch_up` and :meth:`close` (call them from the thread that extends
+        it).
+    path : str or Path
+        Created or overwritten.
+    """
+
+    def __init__(self, trajectory: Trajectory, path: str | Path):
+        self.trajectory = trajectory
+        self.path = Path(path)
+        self.written = 0
+        self._fh = self.path.open("w", newline="")
+        try:
+            csv.writer(self._fh).writerow(trajectory.columns())
+            self._fh.flush()
+        except BaseException:
+            self._fh.close()
+            raise
+
+    def catch_up(self) -> None:
+        """Write the rows stored since the last call, :data:`CSV_BATCH_ROWS` at a time."""
+        total = len(self.trajectory)
+        while self.written < total:
+            stop = min(self.written + CSV_BATCH_ROWS, total)
+            self._fh.buffer.write(csv_bytes(self.trajectory.table(self.written, stop)))
+            self.written = stop
+
+    def close(self) -> None:
+        """Write the remaining rows and close the file; later calls do nothing."""
+        if self._fh.closed:
+            return
+        try:
+            self.catch_up()
+        finally:
+            self._fh.close()
+
+    def __enter__(self) -> CsvStream:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 CSV_BATCH_ROWS = 4096
@@ -220,14 +271,22 @@ def csv_rows(table: np.ndarray) -> str:
     Returns
     -------
     str
-        ``""`` for no rows. Compiled, :func:`vjm_ros.core.float_text.csv_bytes` writes it (about
-        six times faster); else the nested list's ``repr`` is split at ``"], ["`` and ``", "``
-        (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
-        bracket or space).
+        ``""`` for no rows (:func:`csv_bytes` as text).
+    """
+    return csv_bytes(table).decode("ascii")
+
+
+def csv_bytes(table: np.ndarray) -> bytes:
+    """CSV rows of ``table`` as ASCII bytes (see :func:`csv_rows`).
+
+    Compiled, :func:`vjm_ros.core.float_text.csv_bytes` writes them (about six times faster,
+    without holding the GIL); else the nested list's ``repr`` is split at ``"], ["`` and
+    ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
+    bracket or space).
     """
     if len(table) == 0:
-        return ""
+        return b""
     if float_text.COMPILED:
-        return float_text.csv_bytes(table).decode("ascii")
+        return float_text.csv_bytes(table)
     text = repr(np.asarray(table, dtype=float).tolist())
-    return text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n"
+    return (text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n").encode("ascii")

@@ -1,0 +1,105 @@
+"""The outputs of ``vjm run`` (the trajectory and ``trajectory.csv``, the MCAP and rerun logs),
+opened and written in threads of their own while the physics runs (:mod:`vjm_ros.logs.background`).
+
+One thread extends the trajectory and writes its CSV as it grows; one thread per log opens the
+log, writes the run's first sample and every block, and finalizes the log. The files are the ones
+written in the calling thread one block after the other, byte for byte (clocks aside).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from vjm_ros.logs.background import BlockFanOut, Consumer
+from vjm_ros.logs.storage import LogWriters
+from vjm_ros.sim.simulator import Sample, SampleBlock
+from vjm_ros.sim.trajectory import CsvStream, Trajectory
+
+
+class RunOutputs:
+    """Where the blocks of a run go.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        Holds the first sample already; extended block by block (read it after :meth:`close`).
+    first : Sample
+        The run's first sample (t = 0), the first record of every log.
+    openers : sequence of (str, callable)
+        Per log, its option and the function that opens it
+        (:func:`vjm_ros.logs.opening.recorder_openers`); called in the log's thread.
+    on_failure : callable
+        ``on_failure(path, error_text)`` for a log given up during the run (:class:`LogWriters`).
+    csv_path : Path, optional
+        ``trajectory.csv``, created once every log has opened (not at all if one cannot be).
+    block_ticks : int
+        Rows of each block.
+
+    Attributes
+    ----------
+    logs : LogWriters
+        The open logs (after :meth:`close`: those still working, and what failed).
+    recorders : dict
+        The recorder opened for each option (``--mcap``...).
+    """
+
+    def __init__(self, traj: Trajectory, first: Sample,
+                 openers: Sequence[tuple[str, Callable[[], object]]],
+                 on_failure: Callable[[str, str], None], csv_path: Path | None,
+                 block_ticks: int):
+        self.traj = traj
+        self.logs = LogWriters([], on_failure)
+        self.recorders: dict[str, object] = {}
+        self._first = first
+        self._csv_path = csv_path
+        self._csv: CsvStream | None = None
+        consumers = [Consumer("vjm-trajectory", self._extend, self._close_csv)]
+        consumers += [self._log_consumer(key, opener) for key, opener in openers]
+        self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers, depth=8)
+
+    def take(self) -> SampleBlock:
+        """A block to fill (see :meth:`BlockFanOut.take`)."""
+        return self._fan.take()
+
+    def put(self, block: SampleBlock) -> None:
+        """Hand a filled block over; raises what an output raised (a log that could not be
+        opened: :class:`~vjm_ros.core.errors.ConfigurationError`)."""
+        self._fan.put(block)
+
+    def close(self) -> None:
+        """Write every block handed over, close the CSV and finalize the logs; raise what an
+        output raised."""
+        self._fan.close()
+
+    # ------------------------------------------------------------------ consumers
+    def _extend(self, block: SampleBlock) -> None:
+        self.traj.extend(block)
+        if self._fan.all_started:  # the CSV is created only once every log has opened
+            self._open_csv()
+        if self._csv is not None:
+            self._csv.catch_up()
+
+    def _open_csv(self) -> None:
+        if self._csv is None and self._csv_path is not None:
+            self._csv = CsvStream(self.traj, self._csv_path)
+
+    def _close_csv(self) -> None:
+        if self._fan.wait_started():  # also a run without blocks has its first row
+            self._open_csv()
+        if self._csv is not None:
+            self._csv.close()
+
+    def _log_consumer(self, key: str, opener: Callable[[], object]) -> Consumer:
+        logs = self.logs
+        slot: list = []
+
+        def start() -> None:
+            rec = opener()
+            slot.append(rec)
+            self.recorders[key] = rec
+            logs.active.append(rec)
+            logs.write_to(rec, self._first)
+
+        return Consumer(f"vjm-log {key}", lambda block: logs.write_block_to(slot[0], block),
+                        lambda: logs.close_one(slot[0]), start)
