@@ -18,9 +18,11 @@ from vjm_ros.studies.bench.grid import (
     TIERS,
 )
 from vjm_ros.studies.bench.runs import (
+    BLOCK_TICKS,
     RowResult,
 )
 from vjm_ros.studies.bench.scaling import (
+    ONE_LINK_TICKS,
     _scaling_keys,
 )
 
@@ -365,8 +367,9 @@ def _bare_step_lines(table: list[dict], keys: list[str]) -> list[str]:
                          f"bare step ({tick / bare:.2f}x)")
     if not parts:
         return []
-    return ["One link, 4000 ticks observed in blocks of 200 against the same steps alone in one "
-            "compiled call (nothing observed or stored; the arithmetic a tick cannot go below): "
+    return [f"One link, {ONE_LINK_TICKS} ticks observed in blocks of {BLOCK_TICKS} against the "
+            "same steps alone in one compiled call (nothing observed or stored; the arithmetic a "
+            "tick cannot go below): "
             + "; ".join(parts) + ".", ""]
 
 
