@@ -167,6 +167,12 @@ def test_a_stretched_leg_falls_back_to_the_dense_solve(chains):
     hub, dense = _pair(model, ExactClosure())
     assert np.array_equal(hub.accelerations(q, qd, tau), dense.accelerations(q, qd, tau))
     assert _hub_taken(model, _stretched(model, 0))  # the hub's own leg stretched: no matter
+    # the implicit step's blocks M_b + h J^T W J stay regular there: the hub solve, to round-off
+    kp, kv, h = np.full(model.n_rows, 1e5), np.full(model.n_rows, 100.0), 1e-3
+    hub, dense = _pair(model, PenaltyClosure(kp, kv))
+    kappa = float(np.linalg.cond(m + h * (a.T * (h * kp + kv)) @ a))
+    _close(hub.implicit_penalty_velocity(q, qd, tau, h),
+           dense.implicit_penalty_velocity(q, qd, tau, h), kappa)
 
 
 def test_five_bar_start_falls_back_to_the_dense_solve():

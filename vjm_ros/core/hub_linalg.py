@@ -213,10 +213,11 @@ def _hub_solve(jac, c, rcond, minv_at, g, low, vec, blocks, lay):
     besides the hub makes its group singular, and the bound below then refuses.
 
     The bound is rigorous: ``lambda_min(G) >= lambda_min(R)`` (the hub term is positive
-    semi-definite) ``>= min over groups of 1 / ||L^-1||_F^2`` (``R_group = L L^T``, as in
-    :func:`vjm_ros.core.small_linalg._solve_if_well_conditioned`), and
-    ``lambda_max(G) <= trace G``; it must clear ``rcond trace G`` tenfold, as the dense test
-    does. ``g`` and ``low`` receive ``R`` and ``L`` in the places of the hub order; ``vec[2]`` is
+    semi-definite), the smallest eigenvalue of a group of ``s`` rows is at least
+    ``det / (tr / (s - 1))^(s - 1)`` (the product of the others is at most their mean to the
+    power ``s - 1``, and ``det = prod L_jj^2`` from its Cholesky factor ``L``; for two rows at
+    least half of it), and ``lambda_max(G) <= trace G``; it must clear ``rcond trace G``
+    tenfold, as the dense test does. ``g`` and ``low`` receive ``R`` and ``L`` in the places of the hub order; ``vec[2]`` is
     scratch, ``vec[3:3 + r]`` receives ``X`` and ``vec[3 + r:]`` the small system.
     """
     r = c.shape[0]
@@ -245,16 +246,20 @@ def _hub_solve(jac, c, rcond, minv_at, g, low, vec, blocks, lay):
     if not trace > 0.0:
         return False
     x = vec[2]
-    worst = 0.0  # the largest ||L^-1||_F^2 of a group
+    floor = 10.0 * rcond * trace
     for gi in range(groups):
         p0 = lay[r, 2 + gi]
         p1 = lay[r, 3 + gi]
+        det = 1.0
+        tr = 0.0
         for pj in range(p0, p1):  # Cholesky R_group = L L^T
             d = g[pj, pj]
+            tr += d
             for pk in range(p0, pj):
                 d -= low[pj, pk] * low[pj, pk]
             if not d > 0.0:
                 return False
+            det *= d
             ljj = math.sqrt(d)
             low[pj, pj] = ljj
             for p in range(pj + 1, p1):
@@ -262,17 +267,11 @@ def _hub_solve(jac, c, rcond, minv_at, g, low, vec, blocks, lay):
                 for pk in range(p0, pj):
                     s -= low[p, pk] * low[pj, pk]
                 low[p, pj] = s / ljj
-        inv_fro2 = 0.0
-        for pj in range(p0, p1):  # ||L^-1||_F^2, column by column: L x = e_j
-            for p in range(pj, p1):
-                s = 1.0 if p == pj else 0.0
-                for pk in range(pj, p):
-                    s -= low[p, pk] * x[pk]
-                x[p] = s / low[p, p]
-                inv_fro2 += x[p] * x[p]
-        worst = max(worst, inv_fro2)
-    if not 1.0 / worst > 10.0 * rcond * trace:
-        return False
+        # lambda_min >= det / (mean of the other eigenvalues)^(s - 1) >= det / (tr / (s - 1))^(s - 1)
+        for _ in range(p1 - p0 - 1):
+            det /= tr / (p1 - p0 - 1)
+        if not det > floor:
+            return False
     xa = 3  # X = R^-1 [A_h, c] in vec[3 + i, :nh + 1]
     for gi in range(groups):
         p0 = lay[r, 2 + gi]
