@@ -597,8 +597,9 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                     status = max(status, hub_implicit_solve(mm, lu, piv, jac, vec[2], h, acc,
                                                             vec[1], blocks, lay))
                 else:
-                    status = max(status, lu_factor_range(lu, piv, 0, n))
-                    lu_solve_range(lu, piv, acc, 0, n)
+                    # blocks[0] = 0, typed int64: a literal 0 would compile another copy
+                    status = max(status, lu_factor_range(lu, piv, blocks[0], n))
+                    lu_solve_range(lu, piv, acc, blocks[0], n)
                 for j in range(n):
                     acc[j] += qd[j]
             if op == IMPLICIT_VELOCITY:
