@@ -55,11 +55,14 @@ import math
 
 import numpy as np
 
+from vjm_ros.core.hub_linalg import N_HUB_COLUMNS, hub_correction, hub_implicit_solve
 from vjm_ros.core.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
 from vjm_ros.core.jit import jit as _jit
 from vjm_ros.core.small_linalg import (
     lu_factor_blocks,
+    lu_factor_range,
     lu_solve_blocks,
+    lu_solve_range,
     min_norm_correction,
 )
 
@@ -400,22 +403,35 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, NO_ROW)
 
 
-def workspace(n: int, r: int, blocks: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+def workspace(n: int, r: int, blocks: np.ndarray | None = None,
+              layout: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows (built in
     Python once per mechanism: compiled callers receive it, so nothing is allocated per call).
 
-    ``blocks``: boundaries ``0, ..., n`` of the mass matrix's diagonal blocks, one per chain
-    (:func:`vjm_ros.core.packing.chain_blocks`); omitted, ``M`` is taken as one dense block.
+    Parameters
+    ----------
+    n, r : int
+    blocks : ndarray of int64, shape (nb + 1,), optional
+        Boundaries ``0, ..., n`` of the mass matrix's diagonal blocks, one per chain
+        (:func:`vjm_ros.core.packing.chain_blocks`); omitted, ``M`` is taken as one dense block.
+    layout : ndarray of int64, optional
+        :func:`vjm_ros.core.packing.closure_layout` (copied); omitted, no hub layout (the dense
+        solves).
     """
-    m = max(n, r)
     if blocks is None:
         blocks = np.array([0, n], dtype=np.int64)
     blocks = np.ascontiguousarray(blocks, dtype=np.int64)
+    if layout is None:
+        layout = np.zeros((r + 1, N_HUB_COLUMNS), dtype=np.int64)
+        layout[r, 0] = -1
+    lay = np.array(layout, dtype=np.int64)
+    hub = lay[r, 0]
+    nh = int(blocks[hub + 1] - blocks[hub]) if hub >= 0 else 0
+    m = max(n, r, nh + 1)
     return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
-            np.empty((r, r)), np.empty((3, m)), np.empty(r), np.empty(n), np.zeros((4, n)),
-            np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n), blocks,
-            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64),
-            np.array([0, n], dtype=np.int64))
+            np.empty((r, r)), np.zeros((3 + r + nh, m)), np.empty(r), np.empty(n),
+            np.zeros((4, n)), np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n), blocks,
+            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64), lay)
 
 
 @_jit(allocates=False)
@@ -431,7 +447,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     builds its system from the buffers); ``row = -1``: nothing known."""
     n = q0.shape[0]
     r = crow.shape[0]
-    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, whole = work
+    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, lay = work
     q = out_a
     qd = out_b
     for j in range(n):
@@ -466,8 +482,10 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 for j in range(n):
                     lu[i, j] = mm[i, j]
             status = max(status, lu_factor_blocks(lu, piv, blocks))
-            min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec, blocks,
-                                touch)
+            if lay[r, 0] < 0 or not hub_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g,
+                                                   v, vec, blocks, lay):
+                min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec, blocks,
+                                    touch)
             if position:
                 for j in range(n):
                     q[j] = q[j] - corr[j]
@@ -529,8 +547,10 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         s += jac[i, j] * acc[j]
                     rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
                                + beta2 * crow[i, R_RES])
-                min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v, vec,
-                                    blocks, touch)
+                if lay[r, 0] < 0 or not hub_correction(lu, piv, jac, rhs, par[P_RCOND], corr,
+                                                       minv_at, g, v, vec, blocks, lay):
+                    min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v,
+                                        vec, blocks, touch)
                 for i in range(r):
                     crow[i, R_FORCE] = vec[0, i]
                 for j in range(n):
@@ -564,18 +584,25 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         s += jac[i, j] * qd[j]
                     rhs[i] = crow[i, R_FORCE] - h * gains[i, 0] * s
                     vec[2, i] = h * gains[i, 0] + gains[i, 1]
+                hub = lay[r, 0] >= 0  # then the block elimination of hub_implicit_solve
                 for k in range(n):
-                    for j in range(n):
-                        s = 0.0
-                        for i in range(r):
-                            s += jac[i, k] * vec[2, i] * jac[i, j]
-                        lu[k, j] = mm[k, j] + h * s
+                    if not hub:
+                        for j in range(n):
+                            s = 0.0
+                            for i in range(r):
+                                s += jac[i, k] * vec[2, i] * jac[i, j]
+                            lu[k, j] = mm[k, j] + h * s
                     s = 0.0
                     for i in range(r):
                         s += jac[i, k] * rhs[i]
                     acc[k] = h * (tau[k] - bias[k] + s)
-                status = max(status, lu_factor_blocks(lu, piv, whole))
-                lu_solve_blocks(lu, piv, acc, whole)
+                if hub:
+                    status = max(status, hub_implicit_solve(mm, lu, piv, jac, vec[2], h, acc,
+                                                            vec[1], blocks, lay))
+                else:
+                    # blocks[0] = 0, typed int64: a literal 0 would compile another copy
+                    status = max(status, lu_factor_range(lu, piv, blocks[0], n))
+                    lu_solve_range(lu, piv, acc, blocks[0], n)
                 for j in range(n):
                     acc[j] += qd[j]
             if op == IMPLICIT_VELOCITY:

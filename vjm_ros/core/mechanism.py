@@ -39,7 +39,7 @@ from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
-from vjm_ros.core.packing import chain_blocks, pack_method, pack_model
+from vjm_ros.core.packing import chain_blocks, closure_layout, pack_method, pack_model
 
 
 @dataclass
@@ -166,7 +166,8 @@ class Mechanism:
         n, r, k = model.n, model.n_rows, len(model.closures)
         self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
         self._buffers = self._new_buffers()
-        self._work = K.workspace(n, r, chain_blocks(model))
+        blocks = chain_blocks(model)
+        self._work = K.workspace(n, r, blocks, closure_layout(model, blocks))
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         self.model = model

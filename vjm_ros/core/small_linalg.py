@@ -27,33 +27,39 @@ def lu_factor_blocks(a, piv, blocks):
     """
     status = 0
     for b in range(blocks.shape[0] - 1):
-        lo = blocks[b]
-        hi = blocks[b + 1]
-        for k in range(lo, hi):
-            p = k
-            big = abs(a[k, k])
-            for i in range(k + 1, hi):
-                v = abs(a[i, k])
-                if v > big:
-                    big = v
-                    p = i
-            piv[k] = p
-            if p != k:
-                for j in range(lo, hi):
-                    t = a[k, j]
-                    a[k, j] = a[p, j]
-                    a[p, j] = t
-            d = a[k, k]
-            if d == 0.0:
-                status = 1
-                continue
-            inv = 1.0 / d
-            for i in range(k + 1, hi):
-                a[i, k] *= inv
-                f = a[i, k]
-                if f != 0.0:
-                    for j in range(k + 1, hi):
-                        a[i, j] -= f * a[k, j]
+        status = max(status, lu_factor_range(a, piv, blocks[b], blocks[b + 1]))
+    return status
+
+
+@_jit(allocates=False)
+def lu_factor_range(a, piv, lo, hi):
+    """:func:`lu_factor_blocks` of the one diagonal block ``lo .. hi - 1`` of ``a``."""
+    status = 0
+    for k in range(lo, hi):
+        p = k
+        big = abs(a[k, k])
+        for i in range(k + 1, hi):
+            v = abs(a[i, k])
+            if v > big:
+                big = v
+                p = i
+        piv[k] = p
+        if p != k:
+            for j in range(lo, hi):
+                t = a[k, j]
+                a[k, j] = a[p, j]
+                a[p, j] = t
+        d = a[k, k]
+        if d == 0.0:
+            status = 1
+            continue
+        inv = 1.0 / d
+        for i in range(k + 1, hi):
+            a[i, k] *= inv
+            f = a[i, k]
+            if f != 0.0:
+                for j in range(k + 1, hi):
+                    a[i, j] -= f * a[k, j]
     return status
 
 
