@@ -17,10 +17,14 @@ from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
 from vjm_ros.sim.trajectory import Trajectory
+from vjm_ros.studies.bench.scaling import star_scene
 
 pytest.importorskip("numba")
 
-SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "rrr_platform"]
+SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "rrr_platform",
+          "star_6"]
+"""Built-in scenes, and six two-link chains on one pin (``star_6``: the hub solves of
+:mod:`vjm_ros.core.hub_linalg`, which no built-in scene takes)."""
 METHODS = [
     {"integrator": "rk4", "closure": "exact"},
     {"integrator": "rk4", "closure": "exact", "projection": True},
@@ -34,7 +38,7 @@ FIELDS = ("q", "qd", "qdd", "effort", "theta", "points", "closure_force", "closu
 
 
 def _pair(scene: str, **settings):
-    sc = load_scene(scene)
+    sc = star_scene(6) if scene == "star_6" else load_scene(scene)
     sims = [Simulator(sc.model, SimulationSettings(check_stiffness=False, **settings), sc.gains)
             for _ in range(2)]
     if sc.model.actuators:

@@ -125,6 +125,15 @@ class SampleBlock:
                       **{attr: getattr(self, key)[i].copy() for key, attr in BLOCK_FIELDS})
 
 
+def _sum_in_order(values: np.ndarray) -> float:
+    """``values[0] + values[1] + ...`` from the left, as the compiled observation sums (neither
+    numpy's pairwise sum nor BLAS's dot keeps that order)."""
+    total = 0.0
+    for v in values.tolist():
+        total += v
+    return total
+
+
 class Simulator:
     """Fixed-rate simulation of one scene.
 
@@ -454,8 +463,10 @@ class Simulator:
                       if model.points else np.zeros((0, 2)))
             segments = link_segments(model, kin)
         energy = mech.energies(ev, self.qd)
-        # sum Kv Cdot^2: the power drawn by the penalty dampers (as pipeline.observe sums it)
-        dissipation = float(np.sum(mech.method.kv * ev.closure.rate**2)) if mech.is_penalty else 0.0
+        # sum Kv Cdot^2: the power drawn by the penalty dampers (summed as pipeline.observe sums
+        # it, in order: numpy's pairwise sums differ in the last bit from 8 rows on)
+        dissipation = (_sum_in_order(mech.method.kv * ev.closure.rate**2) if mech.is_penalty
+                       else 0.0)
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
@@ -471,7 +482,7 @@ class Simulator:
             closure_error=mech.closures.errors(ev.closure),
             closure_points=ev.closure.points,
             energy=energy,
-            power_in=float(self.tau @ self.qd),
+            power_in=_sum_in_order(self.tau * self.qd),
             dissipation=dissipation,
             segments=segments,
             sigma_min=sigma,
