@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from oracle.mechanism import Mechanism as OracleMechanism
 
-from vjm_ros.core import hub_linalg, kernels, small_linalg
+from vjm_ros.core import hub_linalg, kernels, pipeline, small_linalg
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.packing import HUB_MIN_GROUPS, chain_blocks, closure_layout
@@ -56,7 +56,21 @@ def _pair(model, method):
                                   closure_layout(model, blocks, min_groups=1))
     dense._work = kernels.workspace(model.n, model.n_rows, blocks)
     assert hub._work[-1][model.n_rows, 0] >= 0
+    # the compiled copies that hold the hub solves (the plain ones solve densely)
+    hub._step, hub._advance_ticks = kernels.step_with_hub, pipeline.advance_ticks_with_hub
+    dense._step, dense._advance_ticks = kernels.step, pipeline.advance_ticks
     return hub, dense
+
+
+def test_a_mechanism_takes_the_copy_with_the_hub_solves_only_with_a_hub_layout():
+    """Mechanisms with a hub layout (four chains or more on one pin) run the compiled copies with
+    the hub solves; the others the plain ones, which compile none of that code."""
+    star = Mechanism(star_scene(6).model, ExactClosure())
+    assert star._step is kernels.step_with_hub
+    assert star._advance_ticks is pipeline.advance_ticks_with_hub
+    for name in ("four_bar", "three_chain"):
+        mech = Mechanism(load_scene(name).model, ExactClosure())
+        assert mech._step is kernels.step and mech._advance_ticks is pipeline.advance_ticks
 
 
 def _hub_taken(model, q, rcond=1e-10):

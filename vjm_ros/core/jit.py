@@ -14,6 +14,7 @@ import hashlib
 import importlib.machinery
 import importlib.util
 import sys
+import types
 from pathlib import Path
 
 
@@ -176,4 +177,34 @@ def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
         options["_nrt"] = False
     dispatcher = _njit(**options)(fn)
     _loads_lazily(dispatcher)
+    dispatcher.vjm_options = options
+    return dispatcher
+
+
+def variant(compiled, name: str, **constants):
+    """A second compiled copy of ``compiled`` (made by :func:`jit`) that reads ``constants`` in
+    place of its module's globals of those names, under the name ``name``.
+
+    numba takes a module's globals as compile-time constants and drops the branches that a
+    constant condition never takes before it types anything: code guarded by ``if FLAG:`` with
+    ``FLAG = False`` is not compiled at all in the original, and is in a copy made with
+    ``FLAG=True``. Each copy has its own entry in numba's cache (``name`` is its qualified
+    name). Globals are read when the copy is made: make it at the end of the module.
+    Without numba, the copy is the plain function with those globals.
+    """
+    fn = getattr(compiled, "py_func", compiled)
+    missing = [k for k in constants if k not in fn.__globals__]
+    if missing:
+        raise KeyError(f"{fn.__qualname__}: no module global named {missing}")
+    namespace = dict(fn.__globals__)
+    namespace.update(constants)
+    copy = types.FunctionType(fn.__code__, namespace, name, fn.__defaults__, fn.__closure__)
+    copy.__qualname__ = name
+    copy.__doc__ = fn.__doc__
+    copy.__module__ = fn.__module__
+    if not HAVE_NUMBA:
+        return copy
+    dispatcher = _njit(**compiled.vjm_options)(copy)
+    _loads_lazily(dispatcher)
+    dispatcher.vjm_options = compiled.vjm_options
     return dispatcher

@@ -58,6 +58,7 @@ import numpy as np
 from vjm_ros.core.hub_linalg import N_HUB_COLUMNS, hub_correction, hub_implicit_solve
 from vjm_ros.core.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
 from vjm_ros.core.jit import jit as _jit
+from vjm_ros.core.jit import variant as _variant
 from vjm_ros.core.small_linalg import (
     lu_factor_blocks,
     lu_factor_range,
@@ -434,6 +435,16 @@ def workspace(n: int, r: int, blocks: np.ndarray | None = None,
             np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64), lay)
 
 
+HUB_SOLVES = False
+"""Whether a compiled copy of :func:`step` holds the hub solves of :mod:`vjm_ros.core.hub_linalg`.
+
+A module constant, so numba drops the branches it guards before typing them: :func:`step`
+compiles none of the hub code (most mechanisms have no hub layout, and that code would add
+about 4 s to a cold compile), :data:`step_with_hub` is the copy with it, for mechanisms whose
+workspace has a hub layout (:meth:`vjm_ros.core.mechanism.Mechanism` picks). Given a hub layout,
+:func:`step` solves densely: the same results to round-off."""
+
+
 @_jit(allocates=False)
 def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
          kin, mm, bias, cm, crow, jac, points, out_a, out_b, work, known, row):
@@ -482,8 +493,11 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                 for j in range(n):
                     lu[i, j] = mm[i, j]
             status = max(status, lu_factor_blocks(lu, piv, blocks))
-            if lay[r, 0] < 0 or not hub_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g,
-                                                   v, vec, blocks, lay):
+            solved = False
+            if HUB_SOLVES:
+                solved = lay[r, 0] >= 0 and hub_correction(lu, piv, jac, rhs, 1e-10, corr,
+                                                           minv_at, g, v, vec, blocks, lay)
+            if not solved:
                 min_norm_correction(lu, piv, jac, rhs, 1e-10, corr, minv_at, g, v, vec, blocks,
                                     touch)
             if position:
@@ -547,8 +561,12 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         s += jac[i, j] * acc[j]
                     rhs[i] = -(s + crow[i, R_BIAS] + two_alpha * crow[i, R_RATE]
                                + beta2 * crow[i, R_RES])
-                if lay[r, 0] < 0 or not hub_correction(lu, piv, jac, rhs, par[P_RCOND], corr,
-                                                       minv_at, g, v, vec, blocks, lay):
+                solved = False
+                if HUB_SOLVES:
+                    solved = lay[r, 0] >= 0 and hub_correction(lu, piv, jac, rhs, par[P_RCOND],
+                                                               corr, minv_at, g, v, vec, blocks,
+                                                               lay)
+                if not solved:
                     min_norm_correction(lu, piv, jac, rhs, par[P_RCOND], corr, minv_at, g, v,
                                         vec, blocks, touch)
                 for i in range(r):
@@ -584,7 +602,9 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         s += jac[i, j] * qd[j]
                     rhs[i] = crow[i, R_FORCE] - h * gains[i, 0] * s
                     vec[2, i] = h * gains[i, 0] + gains[i, 1]
-                hub = lay[r, 0] >= 0  # then the block elimination of hub_implicit_solve
+                hub = False  # True: the block elimination of hub_implicit_solve
+                if HUB_SOLVES:
+                    hub = lay[r, 0] >= 0
                 for k in range(n):
                     if not hub:
                         for j in range(n):
@@ -596,10 +616,11 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                     for i in range(r):
                         s += jac[i, k] * rhs[i]
                     acc[k] = h * (tau[k] - bias[k] + s)
-                if hub:
-                    status = max(status, hub_implicit_solve(mm, lu, piv, jac, vec[2], h, acc,
-                                                            vec[1], blocks, lay))
-                else:
+                if HUB_SOLVES:
+                    if hub:
+                        status = max(status, hub_implicit_solve(mm, lu, piv, jac, vec[2], h, acc,
+                                                                vec[1], blocks, lay))
+                if not hub:
                     # blocks[0] = 0, typed int64: a literal 0 would compile another copy
                     status = max(status, lu_factor_range(lu, piv, blocks[0], n))
                     lu_solve_range(lu, piv, acc, blocks[0], n)
@@ -630,3 +651,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                         B16 * ks[0, j] + B13 * ks[1, j] + B13 * ks[2, j] + B16 * ks[3, j]
                     )
     return status
+
+
+step_with_hub = _variant(step, "step_with_hub", HUB_SOLVES=True)
+""":func:`step` with the hub solves compiled in (:data:`HUB_SOLVES`)."""

@@ -167,7 +167,13 @@ class Mechanism:
         self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
         self._buffers = self._new_buffers()
         blocks = chain_blocks(model)
-        self._work = K.workspace(n, r, blocks, closure_layout(model, blocks))
+        layout = closure_layout(model, blocks)
+        self._work = K.workspace(n, r, blocks, layout)
+        # the compiled copies with the hub solves only where there is a hub layout (they take
+        # seconds more to compile)
+        hub = layout[r, 0] >= 0
+        self._step = K.step_with_hub if hub else K.step
+        self._advance_ticks = pipeline.advance_ticks_with_hub if hub else pipeline.advance_ticks
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         self.model = model
@@ -218,7 +224,7 @@ class Mechanism:
         """
         out_a = np.empty(self.n)
         out_b = np.empty(self.n)
-        status = K.step(
+        status = self._step(
             op, q, qd, tau, h, steps, tol, self._lint, self._lflt, self._cint, self._cflt,
             self._gains, self._par, *(self._buffers if buffers is None else buffers), out_a, out_b,
             self._work, K.NO_KNOWN, -1,
@@ -358,7 +364,7 @@ class Mechanism:
         """The closure Jacobian ``A(q)``, shape (r, n), from one kernel call (``evaluations``
         unchanged: this is not a right-hand side; a singular mass matrix does not matter)."""
         zero = np.zeros(self.n)
-        K.step(K.EVALUATE, _vec(q), zero, zero, 0.0, 1, 0.0, self._lint, self._lflt, self._cint,
+        self._step(K.EVALUATE, _vec(q), zero, zero, 0.0, 1, 0.0, self._lint, self._lflt, self._cint,
                self._cflt, self._gains, self._par, *self._buffers, np.empty(self.n),
                np.empty(self.n), self._work, K.NO_KNOWN, -1)
         return self._buffers[5].copy()
@@ -424,7 +430,7 @@ class Mechanism:
         q = _vec(q)
         qd = np.zeros(self.n) if qd is None else _vec(qd)
         buffers = tuple(np.zeros(shape) for shape in self._shapes)
-        K.step(K.EVALUATE if jacobian else K.RESIDUAL, q, qd, np.zeros(self.n), 0.0, 1, 0.0,
+        self._step(K.EVALUATE if jacobian else K.RESIDUAL, q, qd, np.zeros(self.n), 0.0, 1, 0.0,
                self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par, *buffers,
                np.empty(self.n), np.empty(self.n), self._work, K.NO_KNOWN, -1)
         buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
@@ -493,7 +499,7 @@ class Mechanism:
         """
         if method not in _FIXED_METHODS:
             raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
-        done, code = pipeline.advance_ticks(
+        done, code = self._advance_ticks(
             int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
             bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal, out,
             self._work, self._tick_state,

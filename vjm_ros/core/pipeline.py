@@ -37,6 +37,7 @@ import numpy as np
 
 from vjm_ros.core import kernels as K
 from vjm_ros.core.jit import jit as _jit
+from vjm_ros.core.jit import variant as _variant
 
 OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints", "energy",
                "power", "dissipation", "segments")
@@ -62,6 +63,11 @@ NOT_FINITE = 2
 """The state after the failing tick is not finite."""
 BEYOND_LIMIT = 3
 """A closure residual after the failing tick exceeds the divergence limit."""
+
+
+_step = K.step
+"""The kernel the functions below call; their copies ``*_with_hub`` call
+:data:`vjm_ros.core.kernels.step_with_hub`."""
 
 
 @_jit(allocates=False, inline="always")
@@ -98,7 +104,7 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
-    status = K.step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt, gains,
+    status = _step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt, gains,
                     par, kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work, o_qdd,
                     K.NO_ROW)
     power = 0.0
@@ -206,12 +212,12 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         # From the second tick on, the first stage (RK4) or the first step's evaluation is the
         # one observed at the last tick (the same state and efforts; the buffers still hold it).
         known = t - 1  # t = 0: NO_ROW
-        status = K.step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
+        status = _step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
                         par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
             return t, SINGULAR
         if project:
-            status = K.step(K.PROJECT, qa, qb, zero, 0.0, K.PROJECTION_STEPS, 1e-12, lint, lflt,
+            status = _step(K.PROJECT, qa, qb, zero, 0.0, K.PROJECTION_STEPS, 1e-12, lint, lflt,
                             cint, cflt, gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd,
                             work, o_qdd, K.NO_ROW)
             if status != 0:
@@ -229,3 +235,12 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
             if o_error[t, c] > limit:
                 return t, BEYOND_LIMIT
     return ticks, OK
+
+
+observe_with_hub = _variant(observe, "observe_with_hub", _step=K.step_with_hub)
+""":func:`observe` on :data:`vjm_ros.core.kernels.step_with_hub`."""
+
+advance_ticks_with_hub = _variant(advance_ticks, "advance_ticks_with_hub",
+                                  _step=K.step_with_hub, observe=observe_with_hub)
+""":func:`advance_ticks` on :data:`vjm_ros.core.kernels.step_with_hub`, for mechanisms with a
+hub layout (:data:`vjm_ros.core.kernels.HUB_SOLVES`)."""
