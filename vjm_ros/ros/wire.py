@@ -69,6 +69,11 @@ def _sentinels(count: int, first: int) -> np.ndarray:
 class TickWire:
     """Serialized per-tick messages, refilled in place.
 
+    Each per-tick message is serialized once by rclpy (from :class:`~.conversions.TickMessages`)
+    with distinct marker values, which locate its numbers in the bytes; each tick writes the new
+    numbers there through numpy views and the node publishes the bytes as they are. The
+    constructor checks the refill against rclpy's own serialization of test values.
+
     Parameters
     ----------
     joint_names : sequence of str
