@@ -104,6 +104,54 @@ def test_divergence_inside_a_block_raises_the_tick_by_tick_diagnosis():
     assert np.all(np.isfinite(block.q[: len(block)]))
 
 
+@pytest.mark.parametrize("blocks", [[1, 1, 1], [50, 50, 20], [7, 40, 3, 70], [120]])
+def test_block_keeps_the_states_tick_by_tick_keeps(blocks):
+    """The states kept for a divergence's diagnosis (the last 32 that a tick started from, with
+    their times) are the tick-by-tick path's, whatever the blocks: bit for bit."""
+    sc, (one, many) = _pair("four_bar", integrator="rk4", closure="exact")
+    for _ in range(sum(blocks)):
+        one.advance()
+    block = SampleBlock(sc.model, max(blocks))
+    for ticks in blocks:
+        many.advance_block(block, ticks)
+    expected, got = list(one._history), list(many._history)
+    assert len(got) == len(expected) == min(sum(blocks), 32)
+    for (te, qe, qde), (tg, qg, qdg) in zip(expected, got, strict=True):
+        assert tg == te
+        np.testing.assert_array_equal(qg, qe)
+        np.testing.assert_array_equal(qdg, qde)
+    assert one._history[-1][0] == many._history[-1][0]
+
+
+def test_state_history_keeps_the_last_states_as_a_bounded_deque():
+    """StateHistory against collections.deque(maxlen) fed the same states one at a time."""
+    import collections
+
+    from vjm_ros.sim.history import StateHistory
+
+    rng = np.random.default_rng(3)
+    history, reference = StateHistory(5), collections.deque(maxlen=5)
+    tick = 0
+    for rows in [1, 3, 0, 7, 1, 1, 2, 6, 4, 1]:
+        if rows == 1 and rng.random() < 0.5:
+            q, qd = rng.standard_normal(2), rng.standard_normal(2)
+            history.append(tick * 0.1, q, qd)
+            reference.append((tick * 0.1, q, qd))
+        else:
+            qs, qds = rng.standard_normal((rows, 2)), rng.standard_normal((rows, 2))
+            history.extend(tick, 0.1, qs, qds)
+            reference.extend(((tick + i) * 0.1, qs[i], qds[i]) for i in range(rows))
+        tick += rows
+        assert len(history) == len(reference)
+        for (t, q, qd), (tr, qr, qdr) in zip(history, reference, strict=True):
+            assert t == tr
+            np.testing.assert_array_equal(q, qr)
+            np.testing.assert_array_equal(qd, qdr)
+    assert len(history._parts) <= 5  # whole parts older than the last 5 states are dropped
+    with pytest.raises(ValueError, match="maxlen"):
+        StateHistory(0)
+
+
 def test_trajectory_extend_equals_append():
     sc, (one, many) = _pair("five_bar", integrator="rk4", closure="penalty")
     a, b = Trajectory(sc.model, capacity=4), Trajectory(sc.model, capacity=4)  # both must grow

@@ -6,7 +6,6 @@ A control tick of length ``dt = 1 / rate`` holds the efforts constant and advanc
 
 from __future__ import annotations
 
-import collections
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,6 +16,7 @@ from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.model import Model
+from vjm_ros.sim.history import StateHistory
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
     check_stiffness,
@@ -134,6 +134,10 @@ def _sum_in_order(values: np.ndarray) -> float:
     return total
 
 
+HISTORY_STATES = 32
+"""States kept before the latest ticks, judged when a run diverges (:meth:`Simulator._likely_cause`)."""
+
+
 class Simulator:
     """Fixed-rate simulation of one scene.
 
@@ -213,7 +217,7 @@ class Simulator:
         """Back to the scene's initial state (t = 0, zero efforts)."""
         self.t = 0.0
         self.ticks = 0
-        self._history: collections.deque = collections.deque(maxlen=32)
+        self._history = StateHistory(HISTORY_STATES)
         self.q = self.q0.copy()
         self.qd = self.qd0.copy()
         self.efforts = np.zeros(len(self.model.actuators))
@@ -261,7 +265,7 @@ class Simulator:
         """
         if efforts is not None:
             self.set_efforts(efforts)
-        self._history.append((self.t, self.q, self.qd))
+        self._history.append(self.t, self.q, self.qd)
         with np.errstate(all="ignore"):
             try:
                 q, qd = self.integrator.advance(
@@ -330,14 +334,16 @@ class Simulator:
             self.integrator.kernel_method, self.q, self.qd, self.tau, self.h,
             self.settings.substeps, project, limit, self.model.length, self._point_links,
             self._point_local, arrays)
-        # the states before the last ticks, for the diagnosis of a divergence (self.q is
-        # replaced below, never changed in place: no copy; block rows are refilled later: copies)
+        # the states the last ticks started from, for the diagnosis of a divergence (self.q is
+        # replaced below, never changed in place: no copy; block rows are refilled later: one
+        # copy of the rows kept)
         first = max(done - self._history.maxlen, 0)
         if first == 0 and done:
-            self._history.append((start * self.dt, self.q, self.qd))
-        for i in range(max(first, 1), done):
-            self._history.append(((start + i) * self.dt, block.q[i - 1].copy(),
-                                  block.qd[i - 1].copy()))
+            self._history.append(start * self.dt, self.q, self.qd)
+        if done > 1:
+            rows = slice(max(first, 1) - 1, done - 1)
+            self._history.extend(start + rows.start + 1, self.dt, block.q[rows].copy(),
+                                 block.qd[rows].copy())
         if done == 1:
             block.t[0] = (start + 1) * self.dt
         else:
