@@ -239,16 +239,9 @@ def _settings(args, scene):
     )
 
 
-BLOCK_TICKS = 1000
-"""Ticks per block of ``vjm run``: a few ms of computing (2.5 ms for the four-bar with rk4 and
-exact closure, 60 ms for sixteen chains on one pin), which a signal or the progress bar waits
-at most. Each block has a fixed cost in every output (encoding calls, GIL hand-overs between
-the physics and the writer threads): against blocks of 200 ticks, a run with all three logs
-takes about a sixth less CPU (four_bar, 10 s: 106 -> 88 ms)."""
-
-
 def _cmd_run(args) -> int:
     from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.simulator import RUN_BLOCK_TICKS as BLOCK_TICKS
     from vjm_ros.sim.simulator import Simulator
     from vjm_ros.sim.trajectory import Trajectory
 

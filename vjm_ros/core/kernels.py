@@ -83,6 +83,12 @@ EVALUATE = 4
 IMPLICIT_VELOCITY = 5
 RESIDUAL = 6
 PROJECT = 7
+THEN_EVALUATE = 16
+"""Added to a fixed-step method's ``op`` in :func:`step`: after the last step, one evaluation at
+the end state, as :data:`EVALUATE` would make it in a call of its own (the same numbers; the
+acceleration into ``known[row + 1]``, the terms in the buffers, the energies in ``kin``'s ground
+row), saving a second call per observed tick (for a one-link chain, a call costs as much as the
+step's arithmetic: some 35 arrays are passed field by field)."""
 
 B16 = 1.0 / 6.0
 B13 = 1.0 / 3.0
@@ -374,6 +380,8 @@ def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
         * :data:`EXPLICIT_EULER`, :data:`SEMI_IMPLICIT_EULER`, :data:`RK4`,
           :data:`IMPLICIT_EULER`: ``steps`` steps of length ``h`` of that integrator
           (:mod:`vjm_ros.core.integrators.fixed`); ``(out_a, out_b) = (q, qd)`` at the end;
+          plus :data:`THEN_EVALUATE` (:func:`step` only), followed by an evaluation at the end
+          state into ``known[row + 1]``;
         * :data:`RESIDUAL`: closure residuals at ``q0`` with zero rates, no Jacobian (in ``crow``);
         * :data:`PROJECT`: ``(out_a, out_b) = (q, qd)`` projected onto the closure manifold, the
           algorithm of
@@ -459,6 +467,9 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
     n = q0.shape[0]
     r = crow.shape[0]
     lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, lay = work
+    then_evaluate = op >= THEN_EVALUATE
+    if then_evaluate:
+        op = op - THEN_EVALUATE
     q = out_a
     qd = out_b
     for j in range(n):
@@ -513,11 +524,14 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                           or op == IMPLICIT_EULER)
     single = op == EVALUATE or op == IMPLICIT_VELOCITY
     stages = 4 if op == RK4 else 1
-    total = 1 if single else steps * stages
+    total = 1 if single else steps * stages + (1 if then_evaluate else 0)
     # ks: stage accelerations, vs: stage velocities
     acc = out_a if single else scratch
     for it in range(total):
-        stage = it % stages
+        last = then_evaluate and it == total - 1  # the evaluation at the end state
+        stage = 0 if last else it % stages
+        if last:
+            acc = known[row + 1]
         if stage == 0:
             for j in range(n):
                 qi[j] = q[j]
@@ -573,7 +587,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
                     crow[i, R_FORCE] = vec[0, i]
                 for j in range(n):
                     acc[j] += corr[j]
-        if op == EVALUATE:
+        if op == EVALUATE or last:
             kinetic = 0.0
             potential = 0.0
             for i in range(n):

@@ -71,7 +71,7 @@ _step = K.step
 
 
 @_jit(allocates=False, inline="always")
-def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
+def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, evaluated):
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
     Parameters
@@ -93,6 +93,10 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
         segments)`` output arrays (module docstring).
     work : tuple
         Scratch arrays from :func:`vjm_ros.core.kernels.workspace`.
+    evaluated : bool
+        The buffers already hold the evaluation at ``(q, qd)`` with ``tau``, its acceleration
+        in ``out``'s ``qdd[row]`` and its energies in ``kin``'s ground row (a step made with
+        :data:`~vjm_ros.core.kernels.THEN_EVALUATE`); False: evaluate here.
 
     Returns
     -------
@@ -104,9 +108,11 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work):
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
-    status = _step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt, gains,
-                    par, kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row], work, o_qdd,
-                    K.NO_ROW)
+    status = 0
+    if not evaluated:
+        status = _step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt,
+                        gains, par, kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row],
+                        work, o_qdd, K.NO_ROW)
     power = 0.0
     for j in range(n):
         o_q[row, j] = q[j]
@@ -211,8 +217,11 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     for t in range(ticks):
         # From the second tick on, the first stage (RK4) or the first step's evaluation is the
         # one observed at the last tick (the same state and efforts; the buffers still hold it).
+        # Without a projection, the step also evaluates at its end state (THEN_EVALUATE): the
+        # observation's evaluation, without a second call.
         known = t - 1  # t = 0: NO_ROW
-        status = _step(method, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
+        op = method if project else method + K.THEN_EVALUATE
+        status = _step(op, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
                         par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
             return t, SINGULAR
@@ -229,7 +238,8 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         for j in range(n):
             if not (math.isfinite(q[j]) and math.isfinite(qd[j])):
                 return t, NOT_FINITE
-        if observe(t, q, qd, tau, model, buffers, lengths, plink, plocal, out, work) != 0:
+        if observe(t, q, qd, tau, model, buffers, lengths, plink, plocal, out, work,
+                   not project) != 0:
             return t, SINGULAR
         for c in range(k):
             if o_error[t, c] > limit:

@@ -336,7 +336,7 @@ def _measures_text() -> list[str]:
 def _scaling_text(scaling: dict) -> list[str]:
     lines = ["## Cost per tick against size", "",
              "Microseconds per 1 kHz tick (one step per tick, each tick sampled, in blocks of "
-             "200 ticks, one compiled call each), median of repeats. `links`: one "
+             f"at most {BLOCK_TICKS} ticks, one compiled call each), median of repeats. `links`: one "
              "chain of N links whose tip runs on a line; `chains`: N two-link chains whose tips "
              "meet at one pin (2(N−1) closure rows).", "", "![scaling](scaling.png)", ""]
     for family in ("links", "chains"):

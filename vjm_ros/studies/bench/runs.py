@@ -17,7 +17,7 @@ from vjm_ros.core.errors import (
 from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.scene.loader import Scene
-from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
+from vjm_ros.sim.simulator import RUN_BLOCK_TICKS, SampleBlock, SimulationSettings, Simulator
 from vjm_ros.sim.trajectory import Trajectory
 from vjm_ros.studies.bench.grid import (
     CHECK_SETTINGS,
@@ -64,8 +64,9 @@ def _positions(model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pts, link_segments(model, kin)[:, 1]
 
 
-BLOCK_TICKS = 200
-"""Ticks per call when a row is run or timed: a whole-run cost, as ``vjm run`` pays it."""
+BLOCK_TICKS = RUN_BLOCK_TICKS
+"""Ticks per call when a row is run or timed: a whole-run cost, as ``vjm run`` pays it
+(:data:`vjm_ros.sim.simulator.RUN_BLOCK_TICKS`)."""
 
 
 def _efforts(scene: Scene) -> np.ndarray:
