@@ -65,6 +65,22 @@ def test_scenes_lists_builtins():
     assert listed == set(builtin_scenes())
 
 
+def test_closed_output_pipe_ends_quietly():
+    """``vjm scenes | head -1``: the reader goes away before the listing is written; the command
+    stops with the shell's SIGPIPE code and no traceback (the read end is closed before the
+    process can write, so the write always fails)."""
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    proc = subprocess.Popen([sys.executable, "-m", "vjm_ros.app.cli", "scenes"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()
+    try:
+        stderr = proc.communicate(timeout=120)[1].decode()
+    finally:
+        proc.kill()
+    assert proc.returncode == 141, stderr
+    assert stderr == ""
+
+
 @pytest.mark.parametrize("scene", ["six_bar", "rrr_platform"])
 def test_run_writes_contract(tmp_path, scene):
     """trajectory.csv columns, summary.json keys and the --json last line."""

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -140,8 +141,24 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+EXIT_CLOSED_PIPE = 141
+"""Exit code when the reader of standard output went away (``vjm scenes | head``): the shell's
+code for a process ended by SIGPIPE."""
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``vjm`` command."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # The reader closed the pipe: stop quietly, as a process killed by SIGPIPE would, and keep
+        # Python from failing again when it flushes stdout at exit.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_CLOSED_PIPE
+
+
+def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["bench"]:
         from vjm_ros.studies.bench import main as bench_main
