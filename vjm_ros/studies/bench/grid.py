@@ -170,7 +170,11 @@ class Grid:
     scaling_chains : tuple of int
         Chain counts of the cost-per-tick study.
     scaling_ticks : int
-        Ticks timed per repeat in the scaling study.
+        Ticks timed per repeat in the scaling study, at least.
+    scaling_seconds : float
+        Wall time of each timed repeat of the scaling study, at least, s: where
+        ``scaling_ticks`` take less, more ticks are timed (at most :data:`MAX_SCALING_TICKS`), so
+        that a stall of the machine or a timer interrupt does not decide a small size's figure.
     """
 
     fixed: tuple[str, ...]
@@ -181,6 +185,11 @@ class Grid:
     scaling_links: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
     scaling_chains: tuple[int, ...] = (1, 2, 4, 8, 16)
     scaling_ticks: int = 40
+    scaling_seconds: float = 0.02
+
+
+MAX_SCALING_TICKS = 20000
+"""Most ticks timed per repeat of the scaling study (20 simulated seconds at 1 kHz)."""
 
 
 FIXED = ("explicit_euler", "semi_implicit_euler", "rk4", "implicit_euler")

@@ -336,7 +336,9 @@ def _measures_text() -> list[str]:
 def _scaling_text(scaling: dict) -> list[str]:
     lines = ["## Cost per tick against size", "",
              "Microseconds per 1 kHz tick (one step per tick, each tick sampled, in blocks of "
-             f"at most {BLOCK_TICKS} ticks, one compiled call each), median of repeats. `links`: one "
+             f"at most {BLOCK_TICKS} ticks, one compiled call each), median of repeats"
+             + (f", each repeat timing enough ticks to take {1e3 * scaling['seconds_per_repeat']:g} ms"
+                " at least" if scaling.get("seconds_per_repeat") else "") + ". `links`: one "
              "chain of N links whose tip runs on a line; `chains`: N two-link chains whose tips "
              "meet at one pin (2(N−1) closure rows).", "", "![scaling](scaling.png)", ""]
     for family in ("links", "chains"):
@@ -345,7 +347,7 @@ def _scaling_text(scaling: dict) -> list[str]:
         lines += [f"| {family} | n | closure rows | " + " | ".join(keys) + " |",
                   "|---|---|---|" + "---|" * len(keys)]
         for r in table:
-            vals = " | ".join("–" if r.get(k) is None else f"{1e6 * r[k]:.0f}" for k in keys)
+            vals = " | ".join("–" if r.get(k) is None else f"{1e6 * r[k]:.3g}" for k in keys)
             lines.append(f"| {r['size']} | {r['n']} | {r['rows']} | {vals} |")
         g = scaling[family]["growth_exponent"]
         lines += ["", "Growth exponent (cost ∝ n^p, sizes ≥ 4): "

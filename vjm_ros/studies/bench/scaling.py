@@ -15,6 +15,7 @@ from vjm_ros.core.errors import (
 from vjm_ros.scene.loader import Scene, parse_scene
 from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
 from vjm_ros.studies.bench.grid import (
+    MAX_SCALING_TICKS,
     Grid,
 )
 from vjm_ros.studies.bench.progress import (
@@ -157,6 +158,17 @@ def tick_cost(scene: Scene, integrator: str, settings: dict, ticks: int, repeats
     return float(statistics.median(samples))
 
 
+def timed_ticks(scene: Scene, integrator: str, settings: dict, grid: Grid) -> int:
+    """Ticks of each timed repeat of the scaling study: ``grid.scaling_ticks``, or as many as
+    ``grid.scaling_seconds`` of wall time take (from one untimed repeat of
+    ``grid.scaling_ticks``), at most :data:`~vjm_ros.studies.bench.grid.MAX_SCALING_TICKS`."""
+    if grid.scaling_seconds <= 0:
+        return grid.scaling_ticks
+    cost = tick_cost(scene, integrator, settings, grid.scaling_ticks, 1)
+    wanted = math.ceil(grid.scaling_seconds / cost) if cost > 0 else MAX_SCALING_TICKS
+    return int(min(max(grid.scaling_ticks, wanted), MAX_SCALING_TICKS))
+
+
 def bare_step_cost(scene: Scene, integrator: str, settings: dict, ticks: int,
                    repeats: int) -> float | None:
     """Median wall time of one bare step, s: ``ticks`` steps of the same method at 1 kHz in one
@@ -209,7 +221,7 @@ def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
         per tick per method) and the fitted growth exponent of each method for sizes >= 4.
     """
     methods = _scaling_methods(dict(extra or {}))
-    out: dict = {"methods": [m[0] for m in methods]}
+    out: dict = {"methods": [m[0] for m in methods], "seconds_per_repeat": grid.scaling_seconds}
     for family, sizes, build in (("links", grid.scaling_links, chain_scene),
                                  ("chains", grid.scaling_chains, star_scene)):
         table = []
@@ -218,7 +230,9 @@ def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
             row = {"size": size, "n": scene.model.n, "rows": scene.model.n_rows}
             for key, integ, settings in methods:
                 try:
-                    row[key] = tick_cost(scene, integ, settings, grid.scaling_ticks, repeats)
+                    ticks = timed_ticks(scene, integ, settings, grid)
+                    row.setdefault("ticks", {})[key] = ticks
+                    row[key] = tick_cost(scene, integ, settings, ticks, repeats)
                 except (VjmError, np.linalg.LinAlgError) as exc:
                     row[key] = None
                     row.setdefault("errors", {})[key] = str(exc)
