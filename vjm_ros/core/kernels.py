@@ -541,7 +541,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
             for j in range(n):
                 qi[j] = q[j] + h * (cst * vs[stage - 1, j])
                 vs[stage, j] = qd[j] + h * (cst * ks[stage - 1, j])
-        if reuse and it == 0:
+        if reuse and it == 0 and not last:
             for j in range(n):  # the caller evaluated this very state: the same numbers
                 acc[j] = known[row, j]
         else:
