@@ -104,7 +104,7 @@ def test_divergence_inside_a_block_raises_the_tick_by_tick_diagnosis():
     assert np.all(np.isfinite(block.q[: len(block)]))
 
 
-@pytest.mark.parametrize("blocks", [[1, 1, 1], [50, 50, 20], [7, 40, 3, 70], [120]])
+@pytest.mark.parametrize("blocks", [[1, 1, 1], [50, 50, 20], [7, 40, 3, 70], [120], [33, 1, 32]])
 def test_block_keeps_the_states_tick_by_tick_keeps(blocks):
     """The states kept for a divergence's diagnosis (the last 32 that a tick started from, with
     their times) are the tick-by-tick path's, whatever the blocks: bit for bit."""

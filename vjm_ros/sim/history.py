@@ -45,6 +45,21 @@ class StateHistory:
         self._count += rows
         self._trim()
 
+    def add_block(self, tick: int, dt: float, q: np.ndarray, qd: np.ndarray, qs: np.ndarray,
+                  qds: np.ndarray) -> None:
+        """Add the states ticks ``tick .. tick + rows - 1`` of a block started from: ``(q, qd)``,
+        then the end state of every tick but the last (``qs[i]``, ``qds[i]``, shape (rows, n)).
+        Only the rows still among the last ``maxlen`` states are copied (blocks are refilled);
+        ``q`` and ``qd`` are kept by reference."""
+        rows = len(qs)
+        if rows == 0:
+            return
+        self.append(tick * dt, q, qd)  # dropped again below when the block's rows fill maxlen
+        kept = min(rows - 1, self.maxlen)  # end states that start a later tick, kept
+        if kept:
+            at = slice(rows - 1 - kept, rows - 1)
+            self.extend(tick + rows - kept, dt, qs[at].copy(), qds[at].copy())
+
     def _trim(self) -> None:
         """Drop whole parts that are no longer among the last ``maxlen`` states."""
         while self._parts and self._count - _rows(self._parts[0]) >= self.maxlen:

@@ -343,16 +343,9 @@ class Simulator:
             self.integrator.kernel_method, self.q, self.qd, self.tau, self.h,
             self.settings.substeps, project, limit, self.model.length, self._point_links,
             self._point_local, arrays)
-        # the states the last ticks started from, for the diagnosis of a divergence (self.q is
-        # replaced below, never changed in place: no copy; block rows are refilled later: one
-        # copy of the rows kept)
-        first = max(done - self._history.maxlen, 0)
-        if first == 0 and done:
-            self._history.append(start * self.dt, self.q, self.qd)
-        if done > 1:
-            rows = slice(max(first, 1) - 1, done - 1)
-            self._history.extend(start + rows.start + 1, self.dt, block.q[rows].copy(),
-                                 block.qd[rows].copy())
+        # the states the ticks started from, for the diagnosis of a divergence (self.q is
+        # replaced below, never changed in place)
+        self._history.add_block(start, self.dt, self.q, self.qd, block.q[:done], block.qd[:done])
         if done == 1:
             block.t[0] = (start + 1) * self.dt
         else:
