@@ -258,8 +258,7 @@ def _settings(args, scene):
 
 def _cmd_run(args) -> int:
     from vjm_ros.scene.loader import load_scene
-    from vjm_ros.sim.simulator import RUN_BLOCK_TICKS as BLOCK_TICKS
-    from vjm_ros.sim.simulator import Simulator
+    from vjm_ros.sim.simulator import RUN_BLOCK_TICKS, Simulator
     from vjm_ros.sim.trajectory import Trajectory
 
     scene = load_scene(args.scene)
@@ -301,12 +300,12 @@ def _cmd_run(args) -> int:
 
             outputs = RunOutputs(traj, first, openers, _report_log_failure,
                                  None if args.out is None else args.out / "trajectory.csv",
-                                 BLOCK_TICKS)
+                                 RUN_BLOCK_TICKS)
             while sim.ticks < ticks and not stop.requested:
                 block = outputs.take()
                 block.rows = 0
                 try:
-                    sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
+                    sim.advance_block(block, min(RUN_BLOCK_TICKS, ticks - sim.ticks))
                 finally:  # the ticks before a divergence are kept
                     outputs.put(block)
                 progress.update(sim.t)

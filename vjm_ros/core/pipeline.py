@@ -214,13 +214,13 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
     k = cint.shape[0]
     o_qdd = out[2]
     o_error = out[6]
+    # Without a projection, the step also evaluates at its end state (THEN_EVALUATE): the
+    # observation's evaluation, without a second call.
+    op = method if project else method + K.THEN_EVALUATE
     for t in range(ticks):
         # From the second tick on, the first stage (RK4) or the first step's evaluation is the
         # one observed at the last tick (the same state and efforts; the buffers still hold it).
-        # Without a projection, the step also evaluates at its end state (THEN_EVALUATE): the
-        # observation's evaluation, without a second call.
         known = t - 1  # t = 0: NO_ROW
-        op = method if project else method + K.THEN_EVALUATE
         status = _step(op, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
                         par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
