@@ -72,6 +72,16 @@ class GraphProbe:
         pubs = [p for p in (self.efforts, self.named) if p is not None]
         return bool(pubs) and all(p.get_subscription_count() > 0 for p in pubs)
 
+    def wait_for_commands_delivered(self, timeout: float) -> bool:
+        """Wait until the simulator has acknowledged every command published (reliable QoS), at
+        most ``timeout`` s; True when it has. A process that exits right after publishing would
+        otherwise take the commands still queued in its writer with it."""
+        from rclpy.duration import Duration
+
+        pubs = [p for p in (self.efforts, self.named)
+                if p is not None and hasattr(p, "wait_for_all_acked")]
+        return all(p.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9))) for p in pubs)
+
     def publish_efforts(self, values: Sequence[float]) -> None:
         """One ``~/effort_commands`` message (values in the scene's actuator order, N m or N)."""
         self._array.data = values

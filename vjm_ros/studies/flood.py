@@ -6,7 +6,9 @@ Three processes, as in a real ROS graph:
 2. a flooder (``python -m vjm_ros.studies.flood --publish ...``) that publishes ``flood_hz`` commands per
    second for ``seconds`` on both command topics (:class:`FuzzCommands`): valid efforts (some beyond
    the limits), NaN, Inf, wrong-length and oversized arrays, unknown, duplicate and non-actuated
-   names. It then sends one last valid command, the *sentinel*, and writes what it sent to JSON;
+   names. It then sends one last valid command, the *sentinel* (repeated for
+   :data:`SENTINEL_SECONDS`, and waited on until the node has acknowledged it), and writes what it
+   sent to JSON;
 3. this process: a probe that reads ``/joint_states``, samples the node's resident memory, and
    counts the node's warnings.
 
@@ -187,6 +189,11 @@ def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, 
     return 0
 
 
+SENTINEL_SECONDS = 1.0
+"""How long the flooder repeats the sentinel after the flood, s (twice the node's command timeout
+of :func:`measure`)."""
+
+
 def _flood(probe, fuzz: FuzzCommands, rate: float, seconds: float) -> dict:
     """Publish ``rate`` fuzzed commands per second for ``seconds``, then the sentinel."""
     period = 1.0 / rate
@@ -208,9 +215,15 @@ def _flood(probe, fuzz: FuzzCommands, rate: float, seconds: float) -> dict:
             published += 1
     wall = time.monotonic() - t0
     sentinel = fuzz.sentinel()
-    for _ in range(5):  # a few times: a keep-last queue may drop one
+    # The sentinel again every 20 ms for SENTINEL_SECONDS, twice the node's command timeout: it
+    # stays applied that long, so a watcher that loses a burst of states on a loaded machine
+    # still sees it (sent for 0.1 s, it was missed in 1 run of 4 with another process busy).
+    for _ in range(round(SENTINEL_SECONDS / 0.02)):
         probe.publish_efforts(sentinel)
         time.sleep(0.02)
+    # Exit only once the node has the commands (reliable QoS): the flood can leave a backlog
+    # in the writer, which an exiting process would take with it.
+    delivered = probe.wait_for_commands_delivered(10.0)
     return {
         "published": published,
         "wall": wall,
@@ -218,6 +231,7 @@ def _flood(probe, fuzz: FuzzCommands, rate: float, seconds: float) -> dict:
         "sent": dict(fuzz.sent),
         "applicable": [sorted(s) for s in fuzz.applicable],
         "sentinel": sentinel,
+        "delivered": delivered,
     }
 
 
@@ -292,12 +306,17 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             output: list[str] = []
             reader = threading.Thread(target=lambda: output.extend(node.stdout), daemon=True)
             reader.start()
-            _wait_for_first_state(node, states, output)
+            # The flooder starts beside the node, not after its first state: it floods once the
+            # node's command topics match, and its own start-up (seconds on a loaded machine)
+            # then overlaps the node's instead of eating into the 4 s of the node's run that
+            # follow the flood and its sentinel (started after the first state, the sentinel
+            # sometimes came after the node had stopped).
             flooder = subprocess.Popen(
                 [sys.executable, "-m", "vjm_ros.studies.flood", "--publish", "--scene", scene,
                  "--flood-hz", str(flood_hz), "--seconds", str(seconds), "--seed", str(seed),
                  "--out", str(sent_file)],
                 env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            _wait_for_first_state(node, states, output)
             memory = _sample_memory(node, flooder)
             flood_out = flooder.communicate(timeout=60.0)[0]
             if flooder.returncode != 0:
@@ -373,6 +392,7 @@ def _figures(sent: dict, summary: dict, applied: set, text: str, memory: list,
         "foreign_efforts": [list(e) for e in foreign[:5]],
         "n_foreign": len(foreign),
         "sentinel_applied": tuple(sent["sentinel"]) in applied,
+        "sentinel_delivered": sent.get("delivered"),
         "warnings": dict(warnings),
         "warning_lines": sum(warnings.values()),
         "rss_start_mb": float(mb[0]) if mb.size else math.nan,
