@@ -10,7 +10,7 @@ import pytest
 from vjm_ros.studies import start_time
 
 STAGES = ["import", "numba", "scene", "kernel", "simulator", "pipeline",
-          "first_tick"]
+          "first_tick", "compiled"]
 
 
 def test_import_times_sum_self_times_per_top_level_package():
@@ -32,11 +32,14 @@ def test_import_times_sum_self_times_per_top_level_package():
 def test_start_time_measures_warm_and_cold_runs_with_their_stages():
     row = start_time.measure("four_bar", repeats=1, cold_repeats=1)
     assert len(row["warm_runs_s"]) == 1 and len(row["cold_runs_s"]) == 1
-    for key in ("floor_s", "warm_s", "cold_s", "warm_cpu_s", "cold_cpu_s"):
+    for key in ("floor_s", "warm_s", "cold_s", "warm_cpu_s", "cold_cpu_s",
+                "cold_compiled_first_s", "cold_compiled_first_cpu_s"):
         assert math.isfinite(row[key]) and row[key] > 0, key
     for key in ("warm_stages_s", "cold_stages_s"):
         assert list(row[key]) == STAGES, key
         assert all(math.isfinite(v) and v >= 0 for v in row[key].values()), row[key]
+    # warm, the compiled code is loaded before the first tick; cold, it takes over later
+    assert row["warm_stages_s"]["compiled"] < row["cold_stages_s"]["compiled"]
     assert row["warm_imports_s"] and all(v > 0 for v in row["warm_imports_s"].values())
 
 

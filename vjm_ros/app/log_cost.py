@@ -241,6 +241,9 @@ def render_section(r: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry: measure and print the table (or JSON)."""
+    from vjm_ros.core import tiers
+
+    tiers.compile_first()  # times compiled code, never the plain-Python tier
     p = argparse.ArgumentParser(prog="python -m vjm_ros.app.log_cost", description=__doc__)
     p.add_argument("--scene", default="four_bar")
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run")

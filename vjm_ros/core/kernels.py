@@ -568,7 +568,7 @@ def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
             if exact:
                 # A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)
                 two_alpha = 2.0 * par[P_ALPHA]
-                beta2 = par[P_BETA] ** 2
+                beta2 = par[P_BETA] * par[P_BETA]
                 for i in range(r):
                     s = 0.0
                     for j in range(n):

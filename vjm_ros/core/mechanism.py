@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vjm_ros.core import kernels as K
-from vjm_ros.core import pipeline
+from vjm_ros.core import pipeline, tiers
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
@@ -172,8 +172,11 @@ class Mechanism:
         # the compiled copies with the hub solves only where there is a hub layout (they take
         # seconds more to compile)
         hub = layout[r, 0] >= 0
-        self._step = K.step_with_hub if hub else K.step
-        self._advance_ticks = pipeline.advance_ticks_with_hub if hub else pipeline.advance_ticks
+        # as plain Python while numba compiles them, on a machine whose cache lacks them
+        # (vjm_ros.core.tiers)
+        self._step = tiers.entry(K, "step_with_hub" if hub else "step")
+        self._advance_ticks = tiers.entry(
+            pipeline, "advance_ticks_with_hub" if hub else "advance_ticks")
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         self.model = model
@@ -245,6 +248,13 @@ class Mechanism:
         q, qd = self.model.initial_state()
         self._run(K.EVALUATE, q, qd, np.zeros(self.n))
         return time.perf_counter() - start
+
+    @property
+    def tier(self) -> str:
+        """How the block pipeline runs: ``"compiled"``, ``"plain"`` (plain Python while numba
+        compiles it in the background, :mod:`vjm_ros.core.tiers`) or ``"new"`` (not called yet)."""
+        advance = self._advance_ticks
+        return "compiled" if advance.ready else advance.tier
 
     @property
     def is_penalty(self) -> bool:
@@ -499,15 +509,31 @@ class Mechanism:
         """
         if method not in _FIXED_METHODS:
             raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
-        done, code = self._advance_ticks(
-            int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), len(out[0]),
-            bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal, out,
-            self._work, self._tick_state,
-        )
+        advance = self._advance_ticks
+        rows = len(out[0])
         stages = 4 if method == K.RK4 else 1
-        reused = max(done - 1, 0)  # each tick after the first starts from the sample before
-        self.evaluations += done * (stages * int(substeps) + 1) - reused
-        return int(done), int(code)
+        done, code = 0, pipeline.OK
+        while True:
+            # as plain Python (tiers), a few ticks per call: the compiled code takes over as soon
+            # as it is there; each call's first tick evaluates its start state itself
+            part = rows - done if advance.ready else min(PLAIN_PART_TICKS, rows - done)
+            part_out = out if part == rows else tuple(a[done : done + part] for a in out)
+            ran, code = advance(
+                int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
+                bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal,
+                part_out, self._work, self._tick_state,
+            )
+            reused = max(ran - 1, 0)  # each tick after a call's first starts from the sample before
+            self.evaluations += ran * (stages * int(substeps) + 1) - reused
+            done += int(ran)
+            if code or done >= rows:
+                return done, int(code)
+            q, qd = out[0][done - 1], out[1][done - 1]
+
+
+PLAIN_PART_TICKS = 20
+"""Ticks per call of the block pipeline while it runs as plain Python (:mod:`vjm_ros.core.tiers`):
+a few tens of ms of the thesis scenes, after which the compiled code is taken if it is there."""
 
 
 _FIXED_METHODS = (K.EXPLICIT_EULER, K.SEMI_IMPLICIT_EULER, K.RK4, K.IMPLICIT_EULER)

@@ -136,7 +136,8 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, 
         sq = 0.0
         fx = fy = fz = 0.0
         for i in range(first, last):
-            sq += crow[i, K.R_RES] ** 2
+            res = crow[i, K.R_RES]
+            sq += res * res  # x * x, not x ** 2: plain Python's pow may differ by an ulp
             f = crow[i, K.R_FORCE]
             fx += crow[i, K.R_DX] * f
             fy += crow[i, K.R_DY] * f
@@ -149,7 +150,8 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, 
         o_cpoints[row, c, 1] = cpts[c, 1]
     if par[K.P_METHOD] == K.PENALTY:
         for i in range(r):
-            dissipation += gains[i, 1] * crow[i, K.R_RATE] ** 2
+            rate = crow[i, K.R_RATE]
+            dissipation += gains[i, 1] * (rate * rate)
     kinetic = kin[n, K.K_PCOS]
     potential = kin[n, K.K_PSIN]
     spring = kin[n, K.K_SLIDE]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_ros.core import float_text
+from vjm_ros.core import float_text, tiers
 from vjm_ros.core.model import ANGLE, Model
 from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
 from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
@@ -282,11 +282,15 @@ def csv_bytes(table: np.ndarray) -> bytes:
     Compiled, :func:`vjm_ros.core.float_text.csv_bytes` writes them (about six times faster,
     without holding the GIL); else the nested list's ``repr`` is split at ``"], ["`` and
     ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
-    bracket or space).
+    bracket or space): the same text. The latter also while numba compiles the former in the
+    background (:mod:`vjm_ros.core.tiers`).
     """
     if len(table) == 0:
         return b""
     if float_text.COMPILED:
-        return float_text.csv_bytes(table)
+        compiled = tiers.entry(float_text, "_csv")
+        compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
+        if compiled.ready:
+            return float_text.csv_bytes(table)
     text = repr(np.asarray(table, dtype=float).tolist())
     return (text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n").encode("ascii")

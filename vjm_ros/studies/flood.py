@@ -420,6 +420,9 @@ def _format(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
+    from vjm_ros.core import tiers
+
+    tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.flood",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="five_bar", help="scene with actuators (five_bar)")

@@ -177,6 +177,9 @@ def _format(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
+    from vjm_ros.core import tiers
+
+    tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.latency", description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=builtin_scenes(), help="built-in names or YAML paths")
     parser.add_argument("--rate", type=float, default=1000.0, help="tick rate, Hz (1000)")

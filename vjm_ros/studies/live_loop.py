@@ -108,6 +108,9 @@ def measure(scene: str, seconds: float, extra: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from vjm_ros.core import tiers
+
+    tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.live_loop",
                                      description=__doc__.split("\n")[0])
     actuated = [s for s in builtin_scenes() if load_scene(s).model.actuators]

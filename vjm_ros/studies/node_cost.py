@@ -118,6 +118,9 @@ def measure(scene: str, seconds: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from vjm_ros.core import tiers
+
+    tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.node_cost",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=["four_bar", "five_bar", "three_chain"])

@@ -7,12 +7,15 @@
 2. **warm**: the whole process ``vjm run SCENE --duration 0.001`` (one control tick, the summary
    printed, no files written) with numba's cache filled by a run before, median of ``repeats``;
 3. **cold**: the same process with ``NUMBA_CACHE_DIR`` set to a new, empty temporary directory:
-   every compiled entry point is compiled before the first tick (median of ``cold_repeats``);
+   the kernels run as plain Python while a child process compiles them
+   (:mod:`vjm_ros.core.tiers`), median of ``cold_repeats``; and **cold, compiled first**: the
+   same with ``VJM_TIERED=0``, every compiled entry point compiled before the first tick (one
+   run);
 4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
    tick (``duration:=0.001``), rclpy start and shutdown included, median of ``repeats``;
 5. **breakdown**, warm and cold: in a fresh process, the wall time of each start stage
    (:func:`stages`: imports, each compiled entry point loaded from the
-   cache or compiled, the first tick), and from ``python -X importtime`` the import time of each
+   cache or compiled, the first tick, and cold the time until the ticks run compiled), and from ``python -X importtime`` the import time of each
    top-level package (self times summed; ``-X importtime`` itself slows imports a little).
 
 With ``--docs`` it writes the figures as the page's start-time section (:data:`HEADING`; the bench
@@ -66,6 +69,7 @@ def _env(cache: str | None) -> dict[str, str]:
     """The environment of a measured process: numba's cache in ``cache`` (None: the default)."""
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("VJM_TIERED", None)  # the default: tiered where the cache lacks the kernels
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = cache
     return env
@@ -126,7 +130,9 @@ def stages(scene: str) -> dict[str, float]:
     entry point :func:`vjm_ros.core.kernels.step` loaded from numba's cache or compiled, while the
     simulator is built), ``simulator`` (the rest of building it), ``pipeline`` (the compiled
     entry point :func:`vjm_ros.core.pipeline.advance_ticks`, loaded or compiled),
-    ``first_tick`` (one tick advanced and sampled).
+    ``first_tick`` (one tick advanced and sampled), ``compiled`` (from there until the ticks run
+    compiled: ticks advance meanwhile as plain Python, in calls of
+    :data:`~vjm_ros.core.mechanism.PLAIN_PART_TICKS`; 0 when the compiled code was loaded).
 
     Run it in a fresh process: modules imported and functions loaded before are not counted.
     """
@@ -167,7 +173,11 @@ def stages(scene: str) -> dict[str, float]:
     block = SampleBlock(sc.model, 1)
     sim.advance_block(block, 1)
     traj.extend(block)
-    lap("first_tick", t)
+    t = lap("first_tick", t)
+    deadline = t + TIMEOUT
+    while sim.mechanism.tier != "compiled" and time.perf_counter() < deadline:
+        sim.advance_block(block, 1)
+    lap("compiled", t)
     return times
 
 
@@ -187,7 +197,8 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
     -------
     dict
         ``floor_s``, ``warm_s``, ``cold_s`` (median wall times, s), ``warm_cpu_s``,
-        ``cold_cpu_s`` (median CPU times of the same processes, s), ``warm_runs_s``,
+        ``cold_cpu_s`` (median CPU times of the same processes, s), ``cold_compiled_first_s``,
+        ``cold_compiled_first_cpu_s`` (one cold run with ``VJM_TIERED=0``), ``warm_runs_s``,
         ``cold_runs_s`` (each run's wall time, s), ``warm_stages_s``, ``cold_stages_s``
         (:func:`stages`), ``warm_imports_s`` (:func:`import_times`, the ten largest),
         ``load_1min``.
@@ -201,6 +212,8 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
         with tempfile.TemporaryDirectory() as cache:
             cold.append(wall_time(cmd, _env(cache)))
     with tempfile.TemporaryDirectory() as cache:
+        compiled_first = wall_time(cmd, dict(_env(cache), VJM_TIERED="0"))
+    with tempfile.TemporaryDirectory() as cache:
         cold_stages = stages_in_process(scene, cache)
     imports = warm_imports(scene)
     return {
@@ -210,6 +223,8 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
         "cold_s": statistics.median(w for w, _ in cold),
         "warm_cpu_s": statistics.median(c for _, c in warm),
         "cold_cpu_s": statistics.median(c for _, c in cold),
+        "cold_compiled_first_s": compiled_first[0],
+        "cold_compiled_first_cpu_s": compiled_first[1],
         "warm_runs_s": [w for w, _ in warm],
         "cold_runs_s": [w for w, _ in cold],
         "warm_stages_s": stages_in_process(scene, None),
@@ -234,20 +249,25 @@ def render_section(row: dict, when: str) -> str:
         "2-4x with load, compare those of one run). Whole process of "
         f"`vjm run {row['scene']} --duration 0.001` (one control tick), median of "
         f"{len(row['warm_runs_s'])} runs warm (numba's cache filled) and of "
-        f"{len(row['cold_runs_s'])} cold (an empty `NUMBA_CACHE_DIR`: every compiled entry point "
-        f"compiled before the first tick); `python -c pass` takes {row['floor_s']:.2f} s.",
+        f"{len(row['cold_runs_s'])} cold (an empty `NUMBA_CACHE_DIR`: the kernels run as plain "
+        "Python while a child process compiles them, `vjm_ros.core.tiers`), and one cold with "
+        "`VJM_TIERED=0` (every compiled entry point compiled before the first tick); "
+        f"`python -c pass` takes {row['floor_s']:.2f} s.",
         "",
         "| start | whole process, wall s | its CPU time s | target s |",
         "|---|---|---|---|",
         f"| warm | {row['warm_s']:.2f} | {row['warm_cpu_s']:.2f} | 0.5 |",
         f"| cold | {row['cold_s']:.2f} | {row['cold_cpu_s']:.2f} | 3 |",
+        *([f"| cold, compiled first (`VJM_TIERED=0`) | {row['cold_compiled_first_s']:.2f} | "
+           f"{row['cold_compiled_first_cpu_s']:.2f} | – |"]
+          if "cold_compiled_first_s" in row else []),
         *([f"| node warm (`vjm_sim_node`, one tick, rclpy included) | {row['node_warm_s']:.2f} | "
            f"{row['node_warm_cpu_s']:.2f} | – |"] if "node_warm_s" in row else []),
         "",
         "Stages in a fresh process (s; `kernel`: `kernels.step`, `pipeline`: "
         "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; numba's own "
-        "typing and lowering tables are loaded only when something is compiled, in `scene` "
-        "when cold):",
+        "typing and lowering tables are loaded only when something is compiled; `compiled`: "
+        "from the first tick until the ticks run compiled, plain Python meanwhile):",
         "",
         "| stage | " + " | ".join(warm) + " |",
         "|---|" + "---|" * len(warm),
@@ -297,6 +317,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.repeats}; target <= 0.5 s)")
     print(f"  cold {row['cold_s']:.2f} s, CPU {row['cold_cpu_s']:.2f} s (empty numba cache, median "
           f"of {args.cold_repeats}; target <= 3 s)")
+    print(f"  cold, compiled first (VJM_TIERED=0) {row['cold_compiled_first_s']:.2f} s, CPU "
+          f"{row['cold_compiled_first_cpu_s']:.2f} s")
     if args.node:
         print(f"  node warm {row['node_warm_s']:.2f} s, CPU {row['node_warm_cpu_s']:.2f} s "
               f"(vjm_sim_node, one tick in fast mode, rclpy included)")

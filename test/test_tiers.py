@@ -1,0 +1,186 @@
+"""Tiered start (:mod:`vjm_ros.core.tiers`): plain Python while numba compiles in the background.
+
+Oracle: the compiled kernels themselves. The plain copies are the same source run by CPython, and
+numba compiles without fast-math, so every operation rounds the same way: the outputs must be
+bit-identical (tolerance 0; a difference means some expression rounds differently in the two,
+such as ``x ** 2``, which CPython computes with ``pow``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vjm_ros.core import pipeline, tiers
+from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.settings import SimulationSettings
+from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.studies.bench.scaling import star_scene
+
+pytest.importorskip("numba")
+
+SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "star_6"]
+"""The thesis scenes, and six chains on one pin (the hub solves)."""
+METHODS = [
+    {"integrator": "rk4", "closure": "exact"},
+    {"integrator": "rk4", "closure": "exact", "projection": True},
+    {"integrator": "semi_implicit_euler", "closure": "penalty"},
+    {"integrator": "implicit_euler", "closure": "penalty", "substeps": 2},
+    {"integrator": "implicit_euler", "closure": "exact"},
+]
+TICKS = 45
+"""Three calls of :data:`vjm_ros.core.mechanism.PLAIN_PART_TICKS` ticks (the last one short)."""
+
+
+class _Only:
+    """An entry point always compiled (``ready``) or always plain Python."""
+
+    def __init__(self, compiled, ready: bool):
+        self.ready = ready
+        self.function = compiled if ready else tiers.interpreted(compiled)
+
+    def __call__(self, *args):
+        return self.function(*args)
+
+
+def _simulator(sc, settings) -> Simulator:
+    sim = Simulator(sc.model, SimulationSettings(check_stiffness=False, **settings), sc.gains)
+    if sc.model.actuators:
+        sim.set_efforts([a.effort for a in sc.model.actuators])
+    return sim
+
+
+@pytest.mark.parametrize("settings", METHODS, ids=lambda s: "-".join(map(str, s.values())))
+@pytest.mark.parametrize("scene", SCENES)
+def test_plain_copy_computes_the_same_bits(scene, settings, monkeypatch):
+    monkeypatch.setenv(tiers.ENVIRONMENT, "0")  # no compile server: compiled here if need be
+    sc = star_scene(6) if scene == "star_6" else load_scene(scene)
+    compiled, plain = _simulator(sc, settings), _simulator(sc, settings)
+    for sim, ready in ((compiled, True), (plain, False)):
+        mech = sim.mechanism
+        mech._advance_ticks = _Only(mech._advance_ticks.compiled, ready)
+        mech._step = _Only(mech._step.compiled, ready)
+        assert sim.blocks_compiled()
+    blocks = [SampleBlock(sc.model, TICKS) for _ in range(2)]
+    compiled.advance_block(blocks[0], TICKS)
+    plain.advance_block(blocks[1], TICKS)
+    assert blocks[0].rows == blocks[1].rows == TICKS
+    for a, b in zip(blocks[0].arrays, blocks[1].arrays, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # the tick-by-tick entry point too: one evaluation at the last state
+    q, qd = blocks[0].q[-1], blocks[0].qd[-1]
+    np.testing.assert_array_equal(compiled.mechanism.accelerations(q, qd, compiled.tau),
+                                  plain.mechanism.accelerations(q, qd, plain.tau))
+
+
+def test_plain_copy_reaches_every_compiled_callee():
+    """Nothing in the plain copy of the pipeline calls a compiled function (which would compile
+    it in this process, the very wait the plain tier is there to avoid)."""
+    from numba.core.dispatcher import Dispatcher
+
+    seen, todo = set(), [tiers.interpreted(pipeline.advance_ticks_with_hub)]
+    copies = {id(f) for f in tiers._PLAIN.values()}
+    while todo:
+        fn = todo.pop()
+        if id(fn) in seen:
+            continue
+        seen.add(id(fn))
+        for name in fn.__code__.co_names:
+            value = fn.__globals__.get(name)
+            assert not isinstance(value, Dispatcher), f"{fn.__qualname__} calls compiled {name}"
+            if isinstance(value, tiers._Namespace):
+                for attr in value._names.values():
+                    assert not isinstance(attr, Dispatcher)
+                    if id(attr) in copies:
+                        todo.append(attr)
+            elif id(value) in copies:
+                todo.append(value)
+    assert len(seen) > 10  # step, terms, the solves, ...
+
+
+def _servers_of(cache: Path) -> list[int]:
+    """Compile servers running with numba's cache in ``cache``."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmd = (proc / "cmdline").read_bytes()
+            env = (proc / "environ").read_bytes()
+        except OSError:
+            continue
+        if b"vjm_ros.core.tiers" in cmd and f"NUMBA_CACHE_DIR={cache}".encode() in env:
+            found.append(int(proc.name))
+    return found
+
+
+def _vjm(args, cache: Path | None, **env):
+    environ = dict(os.environ, **env)
+    environ.pop(tiers.ENVIRONMENT, None)  # other tests' studies switch the tier off
+    if cache is not None:
+        environ["NUMBA_CACHE_DIR"] = str(cache)
+    return subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", *args], env=environ,
+                          capture_output=True, text=True, timeout=600, check=True)
+
+
+def test_cold_run_writes_what_a_compiled_run_writes(tmp_path):
+    """An empty numba cache: ``vjm run`` starts as plain Python with a compile server beside it,
+    writes the same files as with the kernels compiled, and leaves no process behind."""
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cold, warm = tmp_path / "cold", tmp_path / "warm"
+    _vjm(["run", "five_bar", "--duration", "0.1", "--out", str(cold)], cache)
+    _vjm(["run", "five_bar", "--duration", "0.1", "--out", str(warm)], None)
+    assert (cold / "trajectory.csv").read_bytes() == (warm / "trajectory.csv").read_bytes()
+    keys = ("max_closure_error", "energy_drift", "finite", "samples")
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (cold, warm))
+    assert {k: a.get(k) for k in keys} == {k: b.get(k) for k in keys}
+    deadline = time.monotonic() + 5.0  # the server's exit is asynchronous to the parent's
+    while _servers_of(cache) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _servers_of(cache) == []
+
+
+def test_switched_off_by_the_environment(monkeypatch):
+    """``VJM_TIERED=0`` (and :func:`~vjm_ros.core.tiers.compile_first`, which the benchmarks
+    call) compiles before the first call."""
+    monkeypatch.delenv(tiers.ENVIRONMENT, raising=False)
+    assert tiers.enabled()
+    monkeypatch.setenv(tiers.ENVIRONMENT, "0")
+    assert not tiers.enabled()
+    monkeypatch.setenv(tiers.ENVIRONMENT, "1")
+    tiers.compile_first()
+    assert not tiers.enabled()
+
+
+def test_compile_server_reports_a_failure():
+    """A request the child cannot compile is answered with the reason, not left waiting."""
+    server = tiers.CompileServer()
+    try:
+        number = server.request("vjm_ros.core.kernels", "no_such_kernel", (1.0,))
+        assert server.wait(number, timeout=120)
+        assert server._answers[number].startswith(f"error {number} AttributeError")
+    finally:
+        server.stop()
+    assert server._process.poll() is not None
+
+
+@pytest.mark.slow
+def test_cold_run_switches_to_compiled_code(tmp_path):
+    """A cold run long enough for the compile server to finish: the kernels land in numba's
+    cache (the next run is warm) and the trajectory equals a compiled run's."""
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    cold, warm = tmp_path / "cold", tmp_path / "warm"
+    _vjm(["run", "four_bar", "--duration", "60", "--out", str(cold)], cache)
+    names = " ".join(p.name for p in cache.rglob("*.nbi"))
+    assert "step" in names and "advance_ticks" in names and "_csv" in names
+    _vjm(["run", "four_bar", "--duration", "60", "--out", str(warm)], None)
+    assert (cold / "trajectory.csv").read_bytes() == (warm / "trajectory.csv").read_bytes()

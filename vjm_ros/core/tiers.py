@@ -1,0 +1,377 @@
+"""Tiered start: the kernels run as plain Python while numba compiles them in another process.
+
+On a machine whose numba cache does not hold the kernels yet (a first run after installing or
+upgrading, a new ``NUMBA_CACHE_DIR``), compiling :func:`vjm_ros.core.kernels.step` and the block
+pipeline takes 8-20 s on a 2-core machine. :class:`Tiered` wraps such a compiled entry point:
+
+1. its first call looks into numba's cache; when the compiled code is there (the usual case) it
+   is loaded and every call goes to it, as without this module;
+2. otherwise the entry point is handed to a compile server, one child process per run
+   (``python -m vjm_ros.core.tiers``, at a lower priority, on the other core), and calls run
+   the function's plain-Python copy (:func:`interpreted`: the same source with every compiled
+   callee replaced by its own plain copy) until the child has written the compiled code into
+   numba's cache; the next call then loads it from there and runs compiled from then on.
+
+The plain copy computes the same numbers: numba compiles without fast-math, so each operation
+rounds as Python's float arithmetic does (test/test_tiers.py compares both on the thesis scenes;
+it has found differences of at most a few 1e-20 in values near zero, from the order in which
+LLVM evaluates some products). A run that ends before the child has finished stops the child:
+nothing is left running, and the next run starts the same way.
+
+``VJM_TIERED=0`` in the environment switches this off: the first call then compiles in the
+calling process, as numba does on its own.
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib
+import os
+import pickle
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import types
+
+try:
+    from numba.core.dispatcher import Dispatcher
+except ImportError:  # pragma: no cover - exercised only where numba is missing
+    Dispatcher = ()
+
+ENVIRONMENT = "VJM_TIERED"
+"""Environment variable: ``0`` compiles in the calling process (no plain-Python tier)."""
+
+CHILD_NICENESS = 10
+"""Niceness added to the compile server: the run itself keeps the core it needs."""
+
+_FRAME = struct.Struct("<Q")
+
+
+def enabled() -> bool:
+    """Whether entry points missing from numba's cache start as plain Python."""
+    return os.environ.get(ENVIRONMENT, "1") != "0"
+
+
+def compile_first() -> None:
+    """Compile in this process, and in the processes it starts, before the first call (sets
+    ``VJM_TIERED=0``): for the benchmarks and studies, which time the compiled code."""
+    os.environ[ENVIRONMENT] = "0"
+
+
+# ---------------------------------------------------------------------------- plain copies
+class _Namespace:
+    """A module's globals, read by attribute (``K.EVALUATE``), in a plain copy's globals."""
+
+    __slots__ = ("_names",)
+
+    def __init__(self, names: dict):
+        object.__setattr__(self, "_names", names)
+
+    def __getattr__(self, name: str):
+        try:
+            return self._names[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+_PLAIN: dict[int, types.FunctionType] = {}
+_GLOBALS: dict[int, dict] = {}
+_MODULES: dict[int, _Namespace] = {}
+
+
+def _is_ours(module: types.ModuleType) -> bool:
+    return getattr(module, "__name__", "").startswith("vjm_ros.")
+
+
+def _plain_globals(names: dict) -> dict:
+    """A copy of the globals ``names`` in which compiled functions are plain copies and this
+    package's modules are namespaces of plain copies."""
+    copy = _GLOBALS.get(id(names))
+    if copy is not None:
+        return copy
+    copy = _GLOBALS[id(names)] = dict(names)
+    for key, value in names.items():
+        if isinstance(value, Dispatcher):
+            copy[key] = interpreted(value)
+        elif isinstance(value, types.ModuleType) and _is_ours(value):
+            space = _MODULES.get(id(value))
+            if space is None:  # the module's plain globals, filled in full by the time of a call
+                space = _MODULES[id(value)] = _Namespace(_plain_globals(vars(value)))
+            copy[key] = space
+    return copy
+
+
+def interpreted(function):
+    """The plain-Python copy of a compiled function: its source, with every compiled function it
+    reaches (through its module's globals, a module, or a copy made by
+    :func:`vjm_ros.core.jit.variant`) replaced by that function's plain copy. A function that is
+    not compiled (numba missing, ``NUMBA_DISABLE_JIT``) is returned as it is."""
+    if not isinstance(function, Dispatcher):
+        return function
+    copy = _PLAIN.get(id(function))
+    if copy is None:
+        fn = function.py_func
+        # the globals are registered before they are filled: functions that reach each other
+        # share them
+        copy = types.FunctionType(fn.__code__, _plain_globals(fn.__globals__), fn.__name__,
+                                  fn.__defaults__, fn.__closure__)
+        copy.__qualname__ = fn.__qualname__
+        copy.__doc__ = fn.__doc__
+        _PLAIN[id(function)] = copy
+    return copy
+
+
+# ---------------------------------------------------------------------------- numba's cache
+def signature(dispatcher, args: tuple) -> tuple:
+    """numba's argument types for a call with ``args`` (what the dispatcher itself computes)."""
+    return tuple(dispatcher.typeof_pyval(a) for a in args)
+
+
+def load_cached(dispatcher, args: tuple) -> bool:
+    """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
+    this process already, or loaded now from numba's cache (as numba's own first call does)."""
+    sig = signature(dispatcher, args)
+    if sig in dispatcher.overloads:
+        return True
+    cache = getattr(dispatcher, "_cache", None)
+    context = getattr(dispatcher, "targetctx", None)
+    if cache is None or context is None or not hasattr(dispatcher, "add_overload"):
+        return False
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with global_compiler_lock:
+        result = cache.load_overload(sig, context)
+        if result is None:
+            return False
+        if not result.objectmode:
+            context.insert_user_function(result.entry_point, result.fndesc, [result.library])
+        dispatcher.add_overload(result)
+    return True
+
+
+# ---------------------------------------------------------------------------- compile server
+class CompileServer:
+    """The child process that compiles entry points into numba's cache, in request order.
+
+    Requests are pickled ``(number, module, name, args)`` frames on the child's stdin; the child
+    answers one line per request on its stdout (``ok <number>`` or ``error <number> <why>``),
+    which a thread of this process reads.
+    """
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._answers: dict[int, str] = {}
+        self._events: dict[int, threading.Event] = {}
+        self._process: subprocess.Popen | None = None
+        self._count = 0
+        self.started_at: float | None = None
+
+    def request(self, module: str, name: str, args: tuple) -> int:
+        """Ask for ``module.name`` compiled for ``args``; returns the request's number."""
+        with self._lock:
+            self._count += 1
+            number = self._count
+            self._events[number] = threading.Event()
+            frame = pickle.dumps((number, module, name, args), protocol=pickle.HIGHEST_PROTOCOL)
+            try:
+                process = self._start()
+                process.stdin.write(_FRAME.pack(len(frame)) + frame)
+                process.stdin.flush()
+            except (OSError, ValueError) as exc:  # the child could not start or has gone
+                self._answers[number] = f"error {number} compile server unavailable: {exc}"
+                self._events[number].set()
+        return number
+
+    def done(self, number: int) -> bool:
+        """Whether request ``number`` has been answered (compiled, or failed)."""
+        return self._events[number].is_set()
+
+    def wait(self, number: int, timeout: float | None = None) -> bool:
+        """Wait for request ``number``; False on timeout."""
+        return self._events[number].wait(timeout)
+
+    def _start(self) -> subprocess.Popen:
+        if self._process is not None:
+            return self._process
+        self._stderr = tempfile.TemporaryFile()
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "vjm_ros.core.tiers"], stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=self._stderr, start_new_session=True)
+        self.started_at = time.monotonic()
+        threading.Thread(target=self._read, args=(self._process,), name="vjm-compile-answers",
+                         daemon=True).start()
+        atexit.register(self.stop)
+        return self._process
+
+    def _read(self, process: subprocess.Popen) -> None:
+        for raw in process.stdout:
+            line = raw.decode("utf-8", "replace").strip()
+            parts = line.split(" ", 2)
+            if len(parts) >= 2 and parts[1].isdigit():
+                number = int(parts[1])
+                with self._lock:
+                    self._answers[number] = line
+                    event = self._events.get(number)
+                if event is not None:
+                    event.set()
+        with self._lock:  # the child has gone: every open request fails (compiled here then)
+            for number, event in self._events.items():
+                if not event.is_set():
+                    self._answers[number] = f"error {number} compile server exited"
+                    event.set()
+
+    def stop(self) -> None:
+        """Stop the child (at exit, or when nothing more is needed from it)."""
+        process = self._process
+        if process is None or process.poll() is not None:
+            return
+        try:
+            process.stdin.close()
+        except OSError:
+            pass
+        process.terminate()
+        try:
+            process.wait(timeout=2.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+_SERVER: CompileServer | None = None
+_SERVER_LOCK = threading.Lock()
+
+
+def server() -> CompileServer:
+    """This process's compile server (started with the first request)."""
+    global _SERVER
+    with _SERVER_LOCK:
+        if _SERVER is None:
+            _SERVER = CompileServer()
+        return _SERVER
+
+
+# ---------------------------------------------------------------------------- entry points
+class Tiered:
+    """A compiled entry point that runs as plain Python until its compiled code is available.
+
+    Parameters
+    ----------
+    module : module
+        Module whose global ``name`` is the compiled function (a numba dispatcher).
+    name : str
+
+    Attributes
+    ----------
+    compiled : callable
+        The compiled function.
+    tier : str
+        ``"compiled"``, ``"plain"`` (running as plain Python while the child compiles) or
+        ``"new"`` (not called yet).
+    """
+
+    def __init__(self, module: types.ModuleType, name: str):
+        self.compiled = getattr(module, name)
+        self.module = module.__name__
+        self.name = name
+        self._ready = not isinstance(self.compiled, Dispatcher)
+        self._request: int | None = None
+        self._plain = None
+        self._lock = threading.Lock()
+        self.tier = "compiled" if self._ready else "new"
+
+    def __call__(self, *args):
+        if self._ready:
+            return self.compiled(*args)
+        return self._call(args)
+
+    @property
+    def ready(self) -> bool:
+        """Whether calls run the compiled code (loading it from numba's cache now if the compile
+        server has written it)."""
+        if not self._ready and self._request is not None and server().done(self._request):
+            self._ready = True
+            self.tier = "compiled"
+        return self._ready
+
+    def prepare(self, *args) -> None:
+        """Load the compiled code for calls with arguments like ``args``, or have it compiled in
+        the background, without calling the function."""
+        with self._lock:
+            if self._ready or self._request is not None:
+                return
+            if not enabled() or load_cached(self.compiled, args):
+                self._ready = True
+                self.tier = "compiled"
+                return
+            self._request = server().request(self.module, self.name, args)
+            self.tier = "plain"
+
+    def _call(self, args: tuple):
+        self.prepare(*args)
+        if self.ready:
+            return self.compiled(*args)
+        if self._plain is None:
+            self._plain = interpreted(self.compiled)
+        return self._plain(*args)
+
+
+_ENTRIES: dict[tuple[str, str], Tiered] = {}
+
+
+def entry(module: types.ModuleType, name: str) -> Tiered:
+    """The process's one :class:`Tiered` of ``module.name`` (shared by every caller)."""
+    key = (module.__name__, name)
+    found = _ENTRIES.get(key)
+    if found is None:
+        found = _ENTRIES.setdefault(key, Tiered(module, name))
+    return found
+
+
+# ---------------------------------------------------------------------------- the child
+def _read_frame(stream) -> bytes | None:
+    head = stream.read(_FRAME.size)
+    if len(head) < _FRAME.size:
+        return None
+    (size,) = _FRAME.unpack(head)
+    return stream.read(size)
+
+
+def _watch_parent(parent: int) -> None:
+    """Exit as soon as the process that started this one has gone (killed, say)."""
+    while True:
+        time.sleep(0.2)
+        if os.getppid() != parent:
+            os._exit(0)
+
+
+def serve() -> int:
+    """The compile server's loop (``python -m vjm_ros.core.tiers``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
+    try:
+        os.nice(CHILD_NICENESS)
+    except OSError:  # pragma: no cover - not allowed here: same priority
+        pass
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    os.environ[ENVIRONMENT] = "0"
+    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    while True:
+        frame = _read_frame(stdin)
+        if frame is None:
+            return 0
+        number, module, name, args = pickle.loads(frame)
+        try:
+            dispatcher = getattr(importlib.import_module(module), name)
+            dispatcher.compile(signature(dispatcher, args))
+            answer = f"ok {number}"
+        except Exception as exc:  # noqa: BLE001 - reported; the parent compiles it itself
+            answer = f"error {number} {type(exc).__name__}: {exc}".replace("\n", " ")
+        stdout.write(answer.encode() + b"\n")
+        stdout.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(serve())
