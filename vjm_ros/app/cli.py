@@ -272,6 +272,10 @@ def _cmd_run(args) -> int:
         raise ConfigurationError("--plots needs --out DIR")
     sim = Simulator(scene.model, settings, scene.gains)
     sim.blocks_compiled()  # loads the compiled pipeline before the clock starts
+    if getattr(sim.mechanism, "compiling", False):
+        print("vjm: the compiled kernels are not in numba's cache yet (a first run on this "
+              "machine): the run starts as plain Python while a background process compiles "
+              "them, and goes on compiled once they are there", file=sys.stderr)
     if args.effort is not None:
         sim.set_efforts(np.array(args.effort))
     elif scene.model.actuators:

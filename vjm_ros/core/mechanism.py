@@ -257,6 +257,12 @@ class Mechanism:
         return "compiled" if advance.ready else advance.tier
 
     @property
+    def compiling(self) -> bool:
+        """Whether an entry point of the kernels runs as plain Python while numba compiles it in
+        the background (a first run on a machine, :mod:`vjm_ros.core.tiers`)."""
+        return any(e.tier == "plain" and not e.ready for e in (self._step, self._advance_ticks))
+
+    @property
     def is_penalty(self) -> bool:
         """True when closures are enforced by penalty forces."""
         return isinstance(self._method, PenaltyClosure)

@@ -168,6 +168,12 @@ def open_recorders(
                               rrd=config.rrd, duration=config.duration, rate=sim.settings.rate)
 
 
+COMPILING_NOTE = (
+    "the compiled kernels are not in numba's cache yet (a first run on this machine): the ticks "
+    "run as plain Python (0.1-1.5 ms each on the thesis scenes, so 1 kHz may not be kept) until "
+    "a background process has compiled them (8-20 s); later starts load them")
+
+
 class SimNode(Node):
     """The simulator node: parameters, publishers, subscriptions and services around a TickLoop.
 
@@ -225,6 +231,8 @@ class SimNode(Node):
             f"{', paused' if self.config.start_paused else ''}; actuators "
             f"{sim.model.actuator_names} on {self.get_fully_qualified_name()}/effort_commands"
         )
+        if getattr(sim.mechanism, "compiling", False):
+            self.get_logger().warning(COMPILING_NOTE)
 
     # ------------------------------------------------------------------ set-up
     def _declare_initial_positions(self, model) -> dict[str, float]:
