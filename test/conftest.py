@@ -2,7 +2,7 @@
 
 Set before anything imports rclpy (NOTES.md): ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps
 discovery traffic on loopback; one ``ROS_DOMAIN_ID`` per process (1-101) keeps parallel runs on
-one machine from seeing each other's messages.
+one machine from seeing each other's messages. ``VJM_TIERED=0``: see below.
 """
 
 import os
@@ -13,6 +13,10 @@ os.environ.setdefault(
     "ROS_LOG_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "vjm_ros_test_logs")
 )
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Compiled code from the first call, in this process and in those it starts: the suite asserts
+# what the compiled kernels do (call counts, timings of studies); test/test_tiers.py tests the
+# plain-Python tier of a first run on its own.
+os.environ["VJM_TIERED"] = "0"
 
 
 def four_bar_samples(ticks):

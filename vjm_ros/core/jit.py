@@ -181,9 +181,11 @@ def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     return dispatcher
 
 
-def variant(compiled, name: str, **constants):
+def variant(compiled, name: str, *, inline: str | None = None, **constants):
     """A second compiled copy of ``compiled`` (made by :func:`jit`) that reads ``constants`` in
-    place of its module's globals of those names, under the name ``name``.
+    place of its module's globals of those names, under the name ``name``; ``inline``, when
+    given, replaces its ``inline`` option (``"always"``: a copy that numba inlines into each
+    compiled caller, see :func:`jit`).
 
     numba takes a module's globals as compile-time constants and drops the branches that a
     constant condition never takes before it types anything: code guarded by ``if FLAG:`` with
@@ -204,7 +206,10 @@ def variant(compiled, name: str, **constants):
     copy.__module__ = fn.__module__
     if not HAVE_NUMBA:
         return copy
-    dispatcher = _njit(**compiled.vjm_options)(copy)
+    options = dict(compiled.vjm_options)
+    if inline is not None:
+        options["inline"] = inline
+    dispatcher = _njit(**options)(copy)
     _loads_lazily(dispatcher)
-    dispatcher.vjm_options = compiled.vjm_options
+    dispatcher.vjm_options = options
     return dispatcher

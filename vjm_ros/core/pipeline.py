@@ -68,6 +68,9 @@ BEYOND_LIMIT = 3
 _step = K.step
 """The kernel the functions below call; their copies ``*_with_hub`` call
 :data:`vjm_ros.core.kernels.step_with_hub`."""
+_tick_step = K.step_inline
+"""The same kernel inlined into :func:`advance_ticks` for the tick's steps (one call per tick:
+:data:`vjm_ros.core.kernels.step_inline`); the projection, when asked for, calls :data:`_step`."""
 
 
 @_jit(allocates=False, inline="always")
@@ -223,8 +226,8 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         # From the second tick on, the first stage (RK4) or the first step's evaluation is the
         # one observed at the last tick (the same state and efforts; the buffers still hold it).
         known = t - 1  # t = 0: NO_ROW
-        status = _step(op, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
-                        par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
+        status = _tick_step(op, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
+                             par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
         if status != 0:
             return t, SINGULAR
         if project:
@@ -253,6 +256,7 @@ observe_with_hub = _variant(observe, "observe_with_hub", _step=K.step_with_hub)
 """:func:`observe` on :data:`vjm_ros.core.kernels.step_with_hub`."""
 
 advance_ticks_with_hub = _variant(advance_ticks, "advance_ticks_with_hub",
-                                  _step=K.step_with_hub, observe=observe_with_hub)
+                                  _step=K.step_with_hub, _tick_step=K.step_with_hub_inline,
+                                  observe=observe_with_hub)
 """:func:`advance_ticks` on :data:`vjm_ros.core.kernels.step_with_hub`, for mechanisms with a
 hub layout (:data:`vjm_ros.core.kernels.HUB_SOLVES`)."""
