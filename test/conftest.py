@@ -18,6 +18,17 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 # plain-Python tier of a first run on its own.
 os.environ["VJM_TIERED"] = "0"
 
+FIXED_STEP_SETTINGS = [
+    {"integrator": "rk4", "closure": "exact"},
+    {"integrator": "rk4", "closure": "exact", "projection": True},
+    {"integrator": "semi_implicit_euler", "closure": "penalty"},
+    {"integrator": "implicit_euler", "closure": "penalty", "substeps": 2},
+    {"integrator": "implicit_euler", "closure": "exact"},
+    {"integrator": "explicit_euler", "closure": "exact", "substeps": 4},
+]
+"""Every branch of the compiled tick: each fixed-step method, penalty and exact closure,
+projection, substeps (the block and plain-Python tests run each)."""
+
 
 def four_bar_samples(ticks):
     """Run the built-in four-bar with exact closure for ``ticks`` ticks.

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import FIXED_STEP_SETTINGS
 
 from vjm_ros.core.errors import DivergenceError
 from vjm_ros.scene.loader import load_scene
@@ -25,14 +26,7 @@ SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "rr
           "star_6"]
 """Built-in scenes, and six two-link chains on one pin (``star_6``: the hub solves of
 :mod:`vjm_ros.core.hub_linalg`, which no built-in scene takes)."""
-METHODS = [
-    {"integrator": "rk4", "closure": "exact"},
-    {"integrator": "rk4", "closure": "exact", "projection": True},
-    {"integrator": "semi_implicit_euler", "closure": "penalty"},
-    {"integrator": "implicit_euler", "closure": "penalty", "substeps": 2},
-    {"integrator": "implicit_euler", "closure": "exact"},
-    {"integrator": "explicit_euler", "closure": "exact", "substeps": 4},
-]
+METHODS = FIXED_STEP_SETTINGS
 FIELDS = ("q", "qd", "qdd", "effort", "theta", "points", "closure_force", "closure_error",
           "closure_points", "energy", "power_in", "dissipation", "segments")
 

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import FIXED_STEP_SETTINGS
 
 from vjm_ros.core import pipeline, tiers
 from vjm_ros.scene.loader import load_scene
@@ -28,13 +29,7 @@ pytest.importorskip("numba")
 
 SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "star_6"]
 """The thesis scenes, and six chains on one pin (the hub solves)."""
-METHODS = [
-    {"integrator": "rk4", "closure": "exact"},
-    {"integrator": "rk4", "closure": "exact", "projection": True},
-    {"integrator": "semi_implicit_euler", "closure": "penalty"},
-    {"integrator": "implicit_euler", "closure": "penalty", "substeps": 2},
-    {"integrator": "implicit_euler", "closure": "exact"},
-]
+METHODS = FIXED_STEP_SETTINGS
 TICKS = 45
 """Three calls of :data:`vjm_ros.core.mechanism.PLAIN_PART_TICKS` ticks (the last one short)."""
 
