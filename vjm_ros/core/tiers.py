@@ -2,7 +2,7 @@
 
 On a machine whose numba cache does not hold the kernels yet (a first run after installing or
 upgrading, a new ``NUMBA_CACHE_DIR``), compiling :func:`vjm_ros.core.kernels.step` and the block
-pipeline takes 8-20 s on a 2-core machine. :class:`Tiered` wraps such a compiled entry point:
+pipeline (with its inlined copy of the step) takes 15-40 s on a 2-core machine. :class:`Tiered` wraps such a compiled entry point:
 
 1. its first call looks into numba's cache; when the compiled code is there (the usual case) it
    is loaded and every call goes to it, as without this module;
@@ -12,10 +12,10 @@ pipeline takes 8-20 s on a 2-core machine. :class:`Tiered` wraps such a compiled
    callee replaced by its own plain copy) until the child has written the compiled code into
    numba's cache; the next call then loads it from there and runs compiled from then on.
 
-The plain copy computes the same numbers: numba compiles without fast-math, so each operation
-rounds as Python's float arithmetic does (test/test_tiers.py compares both on the thesis scenes;
-it has found differences of at most a few 1e-20 in values near zero, from the order in which
-LLVM evaluates some products). A run that ends before the child has finished stops the child:
+The plain copy computes the same numbers, bit for bit: numba compiles without fast-math, so each
+operation rounds as CPython's float arithmetic does (test/test_tiers.py holds both equal on the
+thesis scenes and the hub solves). One rule keeps it so: kernels write ``x * x``, not ``x ** 2``,
+which CPython computes with ``pow`` (an ulp off at times). A run that ends before the child has finished stops the child:
 nothing is left running, and the next run starts the same way.
 
 ``VJM_TIERED=0`` in the environment switches this off: the first call then compiles in the

@@ -171,7 +171,7 @@ def open_recorders(
 COMPILING_NOTE = (
     "the compiled kernels are not in numba's cache yet (a first run on this machine): the ticks "
     "run as plain Python (0.1-1.5 ms each on the thesis scenes, so 1 kHz may not be kept) until "
-    "a background process has compiled them (8-20 s); later starts load them")
+    "a background process has compiled them (15-40 s); later starts load them")
 
 
 class SimNode(Node):
