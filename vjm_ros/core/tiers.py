@@ -2,7 +2,8 @@
 
 On a machine whose numba cache does not hold the kernels yet (a first run after installing or
 upgrading, a new ``NUMBA_CACHE_DIR``), compiling :func:`vjm_ros.core.kernels.step` and the block
-pipeline (with its inlined copy of the step) takes 15-40 s on a 2-core machine. :class:`Tiered` wraps such a compiled entry point:
+pipeline (with its inlined copy of the step) takes 15-40 s on a 2-core machine. :class:`Tiered`
+wraps such a compiled entry point:
 
 1. its first call looks into numba's cache; when the compiled code is there (the usual case) it
    is loaded and every call goes to it, as without this module;
