@@ -66,12 +66,12 @@ def test_a_mechanism_takes_the_copy_with_the_hub_solves_only_with_a_hub_layout()
     """Mechanisms with a hub layout (four chains or more on one pin) run the compiled copies with
     the hub solves; the others the plain ones, which compile none of that code."""
     star = Mechanism(star_scene(6).model, ExactClosure())
-    assert star._step.compiled is kernels.step_with_hub
-    assert star._advance_ticks.compiled is pipeline.advance_ticks_with_hub
+    assert star.entry_points[0] is kernels.step_with_hub
+    assert star.entry_points[1] is pipeline.advance_ticks_with_hub
     for name in ("four_bar", "three_chain"):
         mech = Mechanism(load_scene(name).model, ExactClosure())
-        assert mech._step.compiled is kernels.step
-        assert mech._advance_ticks.compiled is pipeline.advance_ticks
+        assert mech.entry_points[0] is kernels.step
+        assert mech.entry_points[1] is pipeline.advance_ticks
 
 
 def _hub_taken(model, q, rcond=1e-10):

@@ -39,7 +39,7 @@ def test_start_time_measures_warm_and_cold_runs_with_their_stages():
         assert list(row[key]) == STAGES, key
         assert all(math.isfinite(v) and v >= 0 for v in row[key].values()), row[key]
     # warm, the compiled code is loaded before the first tick; cold, it takes over later
-    assert row["warm_stages_s"]["compiled"] < row["cold_stages_s"]["compiled"]
+    assert row["warm_plain_ticks"] == 0 < row["cold_plain_ticks"]
     assert row["warm_imports_s"] and all(v > 0 for v in row["warm_imports_s"].values())
 
 

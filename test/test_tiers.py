@@ -60,8 +60,9 @@ def test_plain_copy_computes_the_same_bits(scene, settings, monkeypatch):
     compiled, plain = _simulator(sc, settings), _simulator(sc, settings)
     for sim, ready in ((compiled, True), (plain, False)):
         mech = sim.mechanism
-        mech._advance_ticks = _Only(mech._advance_ticks.compiled, ready)
-        mech._step = _Only(mech._step.compiled, ready)
+        step, advance = mech.entry_points
+        mech._advance_ticks = _Only(advance, ready)
+        mech._step = _Only(step, ready)
         assert sim.blocks_compiled()
     blocks = [SampleBlock(sc.model, TICKS) for _ in range(2)]
     compiled.advance_block(blocks[0], TICKS)

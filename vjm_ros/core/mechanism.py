@@ -174,6 +174,7 @@ class Mechanism:
         hub = layout[r, 0] >= 0
         # as plain Python while numba compiles them, on a machine whose cache lacks them
         # (vjm_ros.core.tiers)
+        # (vjm_ros.core.tiers); the compiled functions themselves once they are in use
         self._step = tiers.entry(K, "step_with_hub" if hub else "step")
         self._advance_ticks = tiers.entry(
             pipeline, "advance_ticks_with_hub" if hub else "advance_ticks")
@@ -232,9 +233,26 @@ class Mechanism:
             self._gains, self._par, *(self._buffers if buffers is None else buffers), out_a, out_b,
             self._work, K.NO_KNOWN, -1,
         )
+        if type(self._step) is tiers.Tiered:
+            self._settle("_step")
         if status:
             raise np.linalg.LinAlgError("Singular matrix")
         return out_a, out_b
+
+    def _settle(self, name: str) -> None:
+        """Call the entry point ``name`` (``"_step"``, ``"_advance_ticks"``) by its compiled
+        function from now on if that is in use: the tiers' wrapper costs about 1 µs per call
+        (an eighth of an evaluation of the four-bar)."""
+        entry = getattr(self, name)
+        if entry.ready:
+            setattr(self, name, entry.compiled)
+
+    @property
+    def entry_points(self) -> tuple:
+        """The compiled functions this mechanism calls: ``(step, advance_ticks)`` of
+        :mod:`~vjm_ros.core.kernels` and :mod:`~vjm_ros.core.pipeline`, or their hub copies."""
+        return tuple(e.compiled if isinstance(e, tiers.Tiered) else e
+                     for e in (self._step, self._advance_ticks))
 
     def warm_up(self) -> float:
         """Compile the kernel, or load it from numba's cache (``evaluations`` unchanged).
@@ -254,13 +272,14 @@ class Mechanism:
         """How the block pipeline runs: ``"compiled"``, ``"plain"`` (plain Python while numba
         compiles it in the background, :mod:`vjm_ros.core.tiers`) or ``"new"`` (not called yet)."""
         advance = self._advance_ticks
-        return "compiled" if advance.ready else advance.tier
+        return advance.tier if isinstance(advance, tiers.Tiered) else "compiled"
 
     @property
     def compiling(self) -> bool:
         """Whether an entry point of the kernels runs as plain Python while numba compiles it in
         the background (a first run on a machine, :mod:`vjm_ros.core.tiers`)."""
-        return any(e.tier == "plain" and not e.ready for e in (self._step, self._advance_ticks))
+        return any(isinstance(e, tiers.Tiered) and e.tier == "plain"
+                   for e in (self._step, self._advance_ticks))
 
     @property
     def is_penalty(self) -> bool:
@@ -383,6 +402,8 @@ class Mechanism:
         self._step(K.EVALUATE, _vec(q), zero, zero, 0.0, 1, 0.0, self._lint, self._lflt, self._cint,
                self._cflt, self._gains, self._par, *self._buffers, np.empty(self.n),
                np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        if type(self._step) is tiers.Tiered:
+            self._settle("_step")
         return self._buffers[5].copy()
 
     def closure_errors(self, q: np.ndarray) -> np.ndarray:
@@ -449,6 +470,8 @@ class Mechanism:
         self._step(K.EVALUATE if jacobian else K.RESIDUAL, q, qd, np.zeros(self.n), 0.0, 1, 0.0,
                self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par, *buffers,
                np.empty(self.n), np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        if type(self._step) is tiers.Tiered:
+            self._settle("_step")
         buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
         return _unpack(buffers, self.n)
 
@@ -522,7 +545,8 @@ class Mechanism:
         while True:
             # as plain Python (tiers), a few ticks per call: the compiled code takes over as soon
             # as it is there; each call's first tick evaluates its start state itself
-            part = rows - done if advance.ready else min(PLAIN_PART_TICKS, rows - done)
+            ready = getattr(advance, "ready", True)  # a compiled function has no tiers
+            part = rows - done if ready else min(PLAIN_PART_TICKS, rows - done)
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
                 int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
@@ -533,6 +557,8 @@ class Mechanism:
             self.evaluations += ran * (stages * int(substeps) + 1) - reused
             done += int(ran)
             if code or done >= rows:
+                if type(advance) is tiers.Tiered:
+                    self._settle("_advance_ticks")
                 return done, int(code)
             q, qd = out[0][done - 1], out[1][done - 1]
 

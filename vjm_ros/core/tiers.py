@@ -33,7 +33,6 @@ import signal
 import struct
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 import types
@@ -169,7 +168,6 @@ class CompileServer:
         self._events: dict[int, threading.Event] = {}
         self._process: subprocess.Popen | None = None
         self._count = 0
-        self.started_at: float | None = None
 
     def request(self, module: str, name: str, args: tuple) -> int:
         """Ask for ``module.name`` compiled for ``args``; returns the request's number."""
@@ -198,11 +196,10 @@ class CompileServer:
     def _start(self) -> subprocess.Popen:
         if self._process is not None:
             return self._process
-        self._stderr = tempfile.TemporaryFile()
+        # a failure is answered on stdout; the caller then compiles, and raises, itself
         self._process = subprocess.Popen(
             [sys.executable, "-m", "vjm_ros.core.tiers"], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=self._stderr, start_new_session=True)
-        self.started_at = time.monotonic()
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True)
         threading.Thread(target=self._read, args=(self._process,), name="vjm-compile-answers",
                          daemon=True).start()
         atexit.register(self.stop)
@@ -269,9 +266,6 @@ class Tiered:
     ----------
     compiled : callable
         The compiled function.
-    tier : str
-        ``"compiled"``, ``"plain"`` (running as plain Python while the child compiles) or
-        ``"new"`` (not called yet).
     """
 
     def __init__(self, module: types.ModuleType, name: str):
@@ -282,7 +276,6 @@ class Tiered:
         self._request: int | None = None
         self._plain = None
         self._lock = threading.Lock()
-        self.tier = "compiled" if self._ready else "new"
 
     def __call__(self, *args):
         if self._ready:
@@ -295,8 +288,15 @@ class Tiered:
         server has written it)."""
         if not self._ready and self._request is not None and server().done(self._request):
             self._ready = True
-            self.tier = "compiled"
         return self._ready
+
+    @property
+    def tier(self) -> str:
+        """``"compiled"``, ``"plain"`` (plain Python while the child compiles) or ``"new"`` (not
+        called yet)."""
+        if self.ready:
+            return "compiled"
+        return "new" if self._request is None else "plain"
 
     def prepare(self, *args) -> None:
         """Load the compiled code for calls with arguments like ``args``, or have it compiled in
@@ -306,10 +306,8 @@ class Tiered:
                 return
             if not enabled() or load_cached(self.compiled, args):
                 self._ready = True
-                self.tier = "compiled"
                 return
             self._request = server().request(self.module, self.name, args)
-            self.tier = "plain"
 
     def _call(self, args: tuple):
         self.prepare(*args)

@@ -289,7 +289,8 @@ def csv_bytes(table: np.ndarray) -> bytes:
         return b""
     if float_text.COMPILED:
         compiled = tiers.entry(float_text, "_csv")
-        compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
+        if not compiled.ready:
+            compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
         if compiled.ready:
             return float_text.csv_bytes(table)
     text = repr(np.asarray(table, dtype=float).tolist())

@@ -120,8 +120,10 @@ def warm_imports(scene: str) -> dict[str, float]:
     return import_times(done.stderr)
 
 
-def stages(scene: str) -> dict[str, float]:
-    """Wall time of each stage of a start in this process, in order, s.
+def stages(scene: str) -> tuple[dict[str, float], int]:
+    """Wall time of each stage of a start in this process, in order, s, and the ticks run as
+    plain Python after the first one until the ticks ran compiled (0 when the compiled code was
+    loaded before the first tick).
 
     Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator,
     :mod:`vjm_ros.app.cli` itself aside: the studies do not import the app layer),
@@ -175,19 +177,22 @@ def stages(scene: str) -> dict[str, float]:
     traj.extend(block)
     t = lap("first_tick", t)
     deadline = t + TIMEOUT
+    plain_ticks = 0
     while sim.mechanism.tier != "compiled" and time.perf_counter() < deadline:
         sim.advance_block(block, 1)
+        plain_ticks += 1
     lap("compiled", t)
-    return times
+    return times, plain_ticks
 
 
-def stages_in_process(scene: str, cache: str | None) -> dict[str, float]:
+def stages_in_process(scene: str, cache: str | None) -> tuple[dict[str, float], int]:
     """:func:`stages` in a fresh process with numba's cache in ``cache`` (None: the default)."""
     done = subprocess.run([sys.executable, "-m", "vjm_ros.studies.start_time", "--stages", scene],
                           env=_env(cache), capture_output=True, text=True, timeout=TIMEOUT)
     if done.returncode != 0:
         raise RuntimeError(f"stages of {scene} failed: {done.stderr[-2000:]}")
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    times, plain_ticks = json.loads(done.stdout.strip().splitlines()[-1])
+    return times, int(plain_ticks)
 
 
 def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
@@ -199,8 +204,8 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
         ``floor_s``, ``warm_s``, ``cold_s`` (median wall times, s), ``warm_cpu_s``,
         ``cold_cpu_s`` (median CPU times of the same processes, s), ``cold_compiled_first_s``,
         ``cold_compiled_first_cpu_s`` (one cold run with ``VJM_TIERED=0``), ``warm_runs_s``,
-        ``cold_runs_s`` (each run's wall time, s), ``warm_stages_s``, ``cold_stages_s``
-        (:func:`stages`), ``warm_imports_s`` (:func:`import_times`, the ten largest),
+        ``cold_runs_s`` (each run's wall time, s), ``warm_stages_s``, ``cold_stages_s``,
+        ``warm_plain_ticks``, ``cold_plain_ticks`` (:func:`stages`), ``warm_imports_s`` (:func:`import_times`, the ten largest),
         ``load_1min``.
     """
     cmd = run_command(scene)
@@ -214,8 +219,9 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
     with tempfile.TemporaryDirectory() as cache:
         compiled_first = wall_time(cmd, dict(_env(cache), VJM_TIERED="0"))
     with tempfile.TemporaryDirectory() as cache:
-        cold_stages = stages_in_process(scene, cache)
+        cold_stages, cold_plain_ticks = stages_in_process(scene, cache)
     imports = warm_imports(scene)
+    warm_stages, warm_plain_ticks = stages_in_process(scene, None)
     return {
         "scene": scene,
         "floor_s": statistics.median(w for w, _ in floor),
@@ -227,8 +233,10 @@ def measure(scene: str, repeats: int, cold_repeats: int) -> dict:
         "cold_compiled_first_cpu_s": compiled_first[1],
         "warm_runs_s": [w for w, _ in warm],
         "cold_runs_s": [w for w, _ in cold],
-        "warm_stages_s": stages_in_process(scene, None),
+        "warm_stages_s": warm_stages,
         "cold_stages_s": cold_stages,
+        "warm_plain_ticks": warm_plain_ticks,
+        "cold_plain_ticks": cold_plain_ticks,
         "warm_imports_s": dict(list(imports.items())[:10]),
         "load_1min": os.getloadavg()[0],
     }
@@ -301,7 +309,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--stages", metavar="SCENE", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.stages:
-        print(json.dumps(stages(args.stages)))
+        print(json.dumps(list(stages(args.stages))))
         return 0
     if args.repeats < 1 or args.cold_repeats < 1:
         parser.error("--repeats and --cold-repeats: expected at least 1")
@@ -323,7 +331,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  node warm {row['node_warm_s']:.2f} s, CPU {row['node_warm_cpu_s']:.2f} s "
               f"(vjm_sim_node, one tick in fast mode, rclpy included)")
     print(f"  warm stages, s: {_stage_line(row['warm_stages_s'])}")
-    print(f"  cold stages, s: {_stage_line(row['cold_stages_s'])}")
+    print(f"  cold stages, s: {_stage_line(row['cold_stages_s'])} ({row['cold_plain_ticks']} "
+          "ticks as plain Python before the compiled ones)")
     print(f"  warm imports (-X importtime, self, s): {_stage_line(row['warm_imports_s'])}")
     if args.docs is not None:
         when = time.strftime("%Y-%m-%dT%H:%M:%S+00:00", time.gmtime())
