@@ -481,7 +481,7 @@ def test_config_file_lists_every_parameter_with_a_valid_value():
     from vjm_ros.realtime.parameters import PARAMETERS, NodeConfig
 
     values = yaml.safe_load((ROOT / "config" / "sim_node.yaml").read_text())
-    values = values["vjm_sim_node"]["ros__parameters"]
+    values = values["/**"]["ros__parameters"]
     assert list(values) == [p.name for p in PARAMETERS]
     NodeConfig.from_values(values)
 
@@ -501,7 +501,7 @@ def test_launch_file_compiles_and_agrees_with_the_node():
     default = next(p.default for p in PARAMETERS if p.name == "scene")
     assert namespace["DEFAULT_SCENE"] == default
     config = yaml.safe_load((ROOT / "config" / "sim_node.yaml").read_text())
-    assert config["vjm_sim_node"]["ros__parameters"]["scene"] == default
+    assert config["/**"]["ros__parameters"]["scene"] == default
     declared = {
         node.args[0].value
         for node in ast.walk(ast.parse(source))
@@ -640,23 +640,33 @@ def test_divergence_exits_with_code_3():
     assert "simulation diverged" in out and "tip_pin" in out
 
 
-def test_params_file_loads_and_logs_are_written(tmp_path):
+@pytest.mark.parametrize("namespace", ["", "/lab/arm"])
+def test_params_file_loads_and_logs_are_written(tmp_path, namespace):
+    """The shipped params file applies to the node, also under a namespace (launch's
+    ``namespace:=``): a copy that changes one value (the scene) must change the run."""
     mcap, rrd = tmp_path / "run.mcap", tmp_path / "run.rrd"
+    text = (ROOT / "config" / "sim_node.yaml").read_text()
+    edited = re.sub(r"(?m)^(\s+scene:) four_bar\b", r"\1 five_bar", text)
+    assert edited != text
+    params = tmp_path / "sim_node.yaml"
+    params.write_text(edited)
+    remap = ("-r", f"__ns:={namespace}") if namespace else ()
     code, out = finish(node_process(
         "duration:=0.2", "realtime:=false", f"mcap:={mcap}", f"rrd:={rrd}", "realtime_priority:=10",
-        args=("--params-file", str(ROOT / "config" / "sim_node.yaml"))))
+        args=(*remap, "--params-file", str(params))))
     assert code == 0, out
     assert "tick loop at SCHED_FIFO priority 10" in out or "realtime_priority 10 not granted" in out
     summary = summary_of(out)
-    assert summary["scene"] == "four_bar" and summary["ticks"] == 200
+    assert summary["scene"] == "five_bar" and summary["ticks"] == 200
     assert rrd.stat().st_size > 0
     from mcap.reader import make_reader
 
     with mcap.open("rb") as f:
         reader = make_reader(f)
         topics = {c.topic for c in reader.get_summary().channels.values()}
-        assert "/joint_states" in topics
-        assert sum(1 for _ in reader.iter_messages(topics=["/joint_states"])) == 201
+        joint_states = f"{namespace}/joint_states"
+        assert joint_states in topics
+        assert sum(1 for _ in reader.iter_messages(topics=[joint_states])) == 201
 
 
 def test_a_log_that_fills_up_is_given_up_while_the_node_runs_on():
