@@ -268,7 +268,8 @@ class BlockEncoder:
     def _values(self, block, rows: int) -> list[list[np.ndarray]]:
         """The float64 runs of each per-tick record, in the order of :attr:`kinds`."""
         force = block.force[:rows]
-        effort = np.broadcast_to(block.effort, block.q[:rows].shape)
+        effort = (block.effort[:rows] if block.effort.ndim == 2  # one row per tick
+                  else np.broadcast_to(block.effort, block.q[:rows].shape))
         values = [[block.q[:rows], block.qd[:rows], effort],
                   [force.reshape(rows, -1)] if force.shape[1] else []]
         values += [[force[:, j, :2], force[:, j, 2:]] for j in range(force.shape[1])]

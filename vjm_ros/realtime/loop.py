@@ -12,8 +12,9 @@ One tick (:meth:`TickLoop.run`):
 3. advance the simulator by one tick;
 4. outputs: ``/clock`` every tick; joint states every ``publish_every`` ticks (from the state
    itself, cheap); constraint forces, wrenches and energy every ``forces_every`` ticks (these need
-   a full :meth:`~vjm_ros.sim.simulator.Simulator.sample`); recorders every tick (a log that cannot
-   be written is given up, :class:`~vjm_ros.logs.storage.LogWriters`); markers and
+   a full :meth:`~vjm_ros.sim.simulator.Simulator.sample`); recorders every tick, in blocks of
+   ticks (:class:`~vjm_ros.logs.rows.LogRows`; a log that cannot be written is given up,
+   :class:`~vjm_ros.logs.storage.LogWriters`); markers and
    diagnostics at their wall-clock periods.
 
 In realtime mode ROS callbacks run between ticks: the loop's :class:`~.gate.Gate` lets them start
@@ -41,6 +42,7 @@ from typing import Protocol
 import numpy as np
 
 from vjm_ros.logs import Timebase
+from vjm_ros.logs.rows import LogRows
 from vjm_ros.logs.storage import LogWriters
 from vjm_ros.realtime.commands import CommandBuffer
 from vjm_ros.realtime.gate import Gate
@@ -162,7 +164,8 @@ class TickLoop:
     outputs : Outputs
     options : LoopOptions
     recorders : sequence of Recorder
-        Written with every tick's sample; told about resets.
+        Written with every tick's sample (a block of ticks at a time, :attr:`log_rows`); told
+        about resets.
     paused : bool
         Start paused.
     clock : callable
@@ -189,6 +192,9 @@ class TickLoop:
         self.options = options or LoopOptions()
         self.logs = LogWriters(recorders, self._log_failed)
         self._clock = clock
+        self.log_rows = LogRows(simulator.model, self.logs.write_block, clock=clock)
+        """Each tick's sample on its way to the logs, written a block at a time by a thread of
+        its own."""
         self._sleep = sleep
         self.pacer = Pacer(simulator.dt, self.options.realtime, clock=clock, sleep=sleep)
         self.monitor = Monitor(clock)
@@ -361,7 +367,10 @@ class TickLoop:
                 self._open_gate()
             return STOPPED
         finally:
-            self.gate.open()
+            try:
+                self.log_rows.close()  # every tick written, also those before a divergence
+            finally:
+                self.gate.open()
             with self._cv:
                 self._cv.notify_all()
 
@@ -469,7 +478,7 @@ class TickLoop:
                 outputs.dynamics(sample, t)
                 self.monitor.observe(sample)
             if self.recorders:
-                self.logs.write(sample)
+                self.log_rows.add(sample)
             if draw:
                 outputs.markers(sample, t)
                 self._next_markers = now + opts.marker_period
@@ -480,8 +489,8 @@ class TickLoop:
         ``advance`` then ``sample`` take 43 µs on four_bar); the smallest singular value of the
         closure Jacobian joins the forces every ``SIGMA_PERIOD``.
 
-        Without recorders the sample's arrays are views of the block, refilled by the next tick
-        (the outputs and the monitor copy what they keep); recorders get a sample of their own.
+        The sample's arrays are views of the block, refilled by the next tick (the outputs, the
+        monitor and :attr:`log_rows` copy what they keep).
         """
         sim = self.sim
         if observed and (self._block_for is sim or sim.blocks_compiled()):
@@ -489,7 +498,7 @@ class TickLoop:
                 self._block, self._block_for = SampleBlock(sim.model, 1), sim
                 self._row = RowSample(self._block)
             sim.advance_block(self._block, 1)
-            sample = self._block.sample(0) if self.recorders else self._row.refresh()
+            sample = self._row.refresh()
             if self._sigma_due(forces):
                 sample.sigma_min = sim.smallest_singular_value()
             return sample
@@ -513,7 +522,8 @@ class TickLoop:
         self.outputs.joints(t, sample.q, sample.qd, sample.effort)
         self.outputs.dynamics(sample, t)
         self.monitor.observe(sample)
-        self.logs.write(sample)
+        if self.recorders:
+            self.log_rows.add(sample)
         if self.options.marker_period > 0:
             self.outputs.markers(sample, t)
 
@@ -536,6 +546,7 @@ class TickLoop:
 
     def _idle(self) -> None:
         """Paused: serve steps, keep diagnostics going, otherwise wait."""
+        self.log_rows.sync()  # the logs show the state the loop rests in
         self.gate.open()
         with self._cv:
             if self._steps_asked == self._steps_done and not self._interrupted_while_paused():
@@ -572,6 +583,10 @@ class TickLoop:
         else:
             self.sim.reset()
         self.commands.clear()
+        self.log_rows.sync()  # the ending episode's ticks are written before the reset is noted
+        if replacement is not None:  # its model may differ in shape
+            self.log_rows.close()
+            self.log_rows = LogRows(self.sim.model, self.logs.write_block, clock=self._clock)
         self.logs.note_reset(t_before)
         self.timebase.tick_ns = int(round(self.sim.dt * 1e9))
         start = self.timebase.reset(t_before) * 1e-9

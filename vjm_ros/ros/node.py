@@ -443,7 +443,11 @@ class SimNode(Node):
 
     # ------------------------------------------------------------------ end
     def close(self) -> None:
-        """Finalize the recorders (idempotent)."""
+        """Finalize the recorders (idempotent), after the ticks still on their way to them."""
+        try:
+            self.loop.log_rows.close()
+        except Exception as exc:  # the rows are lost, the logs are still finalized
+            self.get_logger().error(f"writing the last ticks to the logs: {exc}")
         for rec in list(self.loop.recorders):
             try:
                 rec.close()

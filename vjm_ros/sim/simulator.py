@@ -103,8 +103,9 @@ class SampleBlock:
     ----------
     t : ndarray, shape (T,)
         Simulated time, s.
-    effort : ndarray, shape (n,)
-        Efforts held over the block, N m or N.
+    effort : ndarray, shape (n,) or (T, n)
+        Efforts held over the block, N m or N; or one row per tick, for rows collected from
+        ticks with efforts of their own (:class:`vjm_ros.logs.rows.LogRows`).
     q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation, segments
         As the fields of :class:`Sample`, with a leading tick axis (the layout of
         :mod:`vjm_ros.core.pipeline`).
@@ -130,7 +131,8 @@ class SampleBlock:
 
     def sample(self, i: int) -> Sample:
         """Row ``i`` as a :class:`Sample` of its own (copies: the block is refilled later)."""
-        return Sample(t=float(self.t[i]), effort=self.effort.copy(),
+        effort = self.effort[i] if self.effort.ndim == 2 else self.effort
+        return Sample(t=float(self.t[i]), effort=effort.copy(),
                       **{attr: getattr(self, key)[i].copy() for key, attr in BLOCK_FIELDS})
 
 
