@@ -173,7 +173,6 @@ class Mechanism:
         # seconds more to compile)
         hub = layout[r, 0] >= 0
         # as plain Python while numba compiles them, on a machine whose cache lacks them
-        # (vjm_ros.core.tiers)
         # (vjm_ros.core.tiers); the compiled functions themselves once they are in use
         self._step = tiers.entry(K, "step_with_hub" if hub else "step")
         self._advance_ticks = tiers.entry(
