@@ -158,6 +158,76 @@ def test_switched_off_by_the_environment(monkeypatch):
     assert not tiers.enabled()
 
 
+def _evaluate_args(scene: str) -> tuple:
+    """Arguments of one evaluation by :func:`vjm_ros.core.kernels.step` of ``scene`` at rest."""
+    from vjm_ros.core import kernels
+    from vjm_ros.core.mechanism import Mechanism
+
+    m = Mechanism.reader(load_scene(scene).model)
+    q, qd = m.model.initial_state()
+    return (kernels.EVALUATE, q, qd, np.zeros(m.n), 0.0, 1, 0.0, m._lint, m._lflt, m._cint,
+            m._cflt, m._gains, m._par, *m._buffers, np.empty(m.n), np.empty(m.n), m._work,
+            kernels.NO_KNOWN, -1)
+
+
+def test_the_first_calls_run_plain_without_loading_the_compiled_code(monkeypatch):
+    """``plain_calls``: the first calls run the plain copy and load nothing; the next one loads
+    the compiled code; the outputs are the same bits. :meth:`~vjm_ros.core.tiers.Tiered.eager`
+    ends the plain calls at once, and with the tiers switched off there are none."""
+    from vjm_ros.core import kernels
+
+    args = _evaluate_args("five_bar")
+    kernels.step(*args)  # compiled in this process (or loaded): loading below finds it at once
+    expected = [a.copy() for a in args[-5:-3]]
+    loads = []
+    real = tiers.load_cached
+    monkeypatch.setattr(tiers, "load_cached", lambda d, a: loads.append(d) or real(d, a))
+    monkeypatch.setenv(tiers.ENVIRONMENT, "1")
+
+    def outputs_of(entry):
+        entry(*args)
+        return [a.copy() for a in args[-5:-3]]
+
+    entry = tiers.Tiered(kernels, "step", plain_calls=2)
+    for _ in range(2):
+        assert [o.tobytes() for o in outputs_of(entry)] == [o.tobytes() for o in expected]
+        assert loads == [] and entry.tier == "new"
+    assert [o.tobytes() for o in outputs_of(entry)] == [o.tobytes() for o in expected]
+    assert loads == [kernels.step] and entry.tier == "compiled"
+
+    eager = tiers.Tiered(kernels, "step", plain_calls=2)
+    eager.eager()
+    outputs_of(eager)
+    assert eager.tier == "compiled" and len(loads) == 2
+    monkeypatch.setenv(tiers.ENVIRONMENT, "0")
+    off = tiers.Tiered(kernels, "step", plain_calls=2)
+    outputs_of(off)
+    assert off.tier == "compiled" and off._plain is None  # the compiled code ran at once
+
+
+def test_a_run_in_blocks_never_loads_the_kernel(tmp_path):
+    """A tiered ``vjm run`` builds its simulator and ticks without loading the kernel from
+    numba's cache (0.05-0.1 s of its start): its few evaluations outside the block pipeline run
+    as plain Python. The pipeline itself is loaded, or compiled in the background."""
+    script = (
+        "from vjm_ros.core import kernels\n"
+        "from vjm_ros.scene.loader import load_scene\n"
+        "from vjm_ros.sim.settings import resolve_settings\n"
+        "from vjm_ros.sim.simulator import SampleBlock, Simulator\n"
+        "sc = load_scene('four_bar')\n"
+        "sim = Simulator(sc.model, resolve_settings(sc.defaults, sc.gains), sc.gains)\n"
+        "sim.blocks_compiled()\n"
+        "block = SampleBlock(sc.model, 10)\n"
+        "sim.advance_block(block, 10)\n"
+        "sim.sample()\n"
+        "print(len(kernels.step.overloads), sim.mechanism._step.tier)\n")
+    env = {**os.environ, tiers.ENVIRONMENT: "1"}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=600, env=env, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["0", "new"]
+
+
 def test_compile_server_reports_a_failure():
     """A request the child cannot compile is answered with the reason, not left waiting."""
     server = tiers.CompileServer()

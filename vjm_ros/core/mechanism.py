@@ -139,7 +139,11 @@ class Mechanism:
     method : PenaltyClosure or ExactClosure
     warm_up : bool
         Compile the kernel (or load it from numba's cache) now, so that the first control tick
-        does not pay for it.
+        does not pay for it. Not where entry points start as plain Python
+        (:func:`vjm_ros.core.tiers.enabled`; the benchmarks and studies compile first): there
+        the kernel's first :data:`STEP_PLAIN_CALLS` calls run as plain Python, which a run that
+        ticks in the block pipeline (a kernel of its own) never outgrows, and it starts 0.1 s
+        sooner without loading the kernel; :meth:`warm_up` loads it when a loop needs it.
 
     Attributes
     ----------
@@ -174,7 +178,8 @@ class Mechanism:
         hub = layout[r, 0] >= 0
         # as plain Python while numba compiles them, on a machine whose cache lacks them
         # (vjm_ros.core.tiers); the compiled functions themselves once they are in use
-        self._step = tiers.entry(K, "step_with_hub" if hub else "step")
+        self._step = tiers.entry(K, "step_with_hub" if hub else "step",
+                                 plain_calls=STEP_PLAIN_CALLS)
         self._advance_ticks = tiers.entry(
             pipeline, "advance_ticks_with_hub" if hub else "advance_ticks")
         self._tick_state = pipeline.tick_state(n)
@@ -184,7 +189,8 @@ class Mechanism:
         self.evaluations = 0
         self.method = method
         self.closures = ClosureRows(model)
-        self.warm_up_time = self.warm_up() if warm_up else float("nan")
+        self.warm_up_time = (self.warm_up() if warm_up and not tiers.enabled()
+                             else float("nan"))
 
     @classmethod
     def reader(cls, model: Model) -> Mechanism:
@@ -254,7 +260,9 @@ class Mechanism:
                      for e in (self._step, self._advance_ticks))
 
     def warm_up(self) -> float:
-        """Compile the kernel, or load it from numba's cache (``evaluations`` unchanged).
+        """Compile the kernel, or load it from numba's cache (``evaluations`` unchanged); where
+        entry points start as plain Python, have it compiled in the background if the cache
+        lacks it.
 
         Returns
         -------
@@ -263,6 +271,8 @@ class Mechanism:
         """
         start = time.perf_counter()
         q, qd = self.model.initial_state()
+        if type(self._step) is tiers.Tiered:
+            self._step.eager()
         self._run(K.EVALUATE, q, qd, np.zeros(self.n))
         return time.perf_counter() - start
 
@@ -560,6 +570,14 @@ class Mechanism:
                     self._settle("_advance_ticks")
                 return done, int(code)
             q, qd = out[0][done - 1], out[1][done - 1]
+
+
+STEP_PLAIN_CALLS = 8
+"""Calls of the kernel (:func:`vjm_ros.core.kernels.step`) that run as plain Python before it is
+loaded from numba's cache (:class:`vjm_ros.core.tiers.Tiered`): one evaluation of the thesis
+scenes takes 0.2-0.5 ms as plain Python, the load 70-120 ms on a slow machine. ``vjm run`` makes
+three such calls besides its block pipeline (the scene's inertia check, its assembly, the
+mobility check)."""
 
 
 PLAIN_PART_TICKS = 20

@@ -261,6 +261,13 @@ class Tiered:
     module : module
         Module whose global ``name`` is the compiled function (a numba dispatcher).
     name : str
+    plain_calls : int
+        Calls that run as plain Python before the compiled code is loaded at all, while entry
+        points start as plain Python (:func:`enabled`): loading a function from numba's cache
+        takes 0.05-0.1 s, dozens of plain-Python evaluations of a kernel, so a process that calls
+        it only a few times (a scene's checks, a first sample) is done sooner without it. The
+        outputs are the same either way (the plain copy rounds as the compiled code does).
+        :meth:`prepare` and :meth:`eager` end this at once.
 
     Attributes
     ----------
@@ -268,13 +275,14 @@ class Tiered:
         The compiled function.
     """
 
-    def __init__(self, module: types.ModuleType, name: str):
+    def __init__(self, module: types.ModuleType, name: str, plain_calls: int = 0):
         self.compiled = getattr(module, name)
         self.module = module.__name__
         self.name = name
         self._ready = not isinstance(self.compiled, Dispatcher)
         self._request: int | None = None
         self._plain = None
+        self._plain_left = max(int(plain_calls), 0)
         self._lock = threading.Lock()
 
     def __call__(self, *args):
@@ -293,14 +301,20 @@ class Tiered:
     @property
     def tier(self) -> str:
         """``"compiled"``, ``"plain"`` (plain Python while the child compiles) or ``"new"`` (not
-        called yet)."""
+        called yet, or only its first ``plain_calls``)."""
         if self.ready:
             return "compiled"
         return "new" if self._request is None else "plain"
 
+    def eager(self) -> None:
+        """Load the compiled code (or have it compiled) at the next call, with no more calls
+        as plain Python before (``plain_calls`` spent)."""
+        self._plain_left = 0
+
     def prepare(self, *args) -> None:
         """Load the compiled code for calls with arguments like ``args``, or have it compiled in
         the background, without calling the function."""
+        self._plain_left = 0
         with self._lock:
             if self._ready or self._request is not None:
                 return
@@ -310,9 +324,12 @@ class Tiered:
             self._request = server().request(self.module, self.name, args)
 
     def _call(self, args: tuple):
-        self.prepare(*args)
-        if self.ready:
-            return self.compiled(*args)
+        if self._plain_left > 0 and self._request is None and enabled():
+            self._plain_left -= 1  # a race between threads costs at most a call either way
+        else:
+            self.prepare(*args)
+            if self.ready:
+                return self.compiled(*args)
         if self._plain is None:
             self._plain = interpreted(self.compiled)
         return self._plain(*args)
@@ -321,12 +338,13 @@ class Tiered:
 _ENTRIES: dict[tuple[str, str], Tiered] = {}
 
 
-def entry(module: types.ModuleType, name: str) -> Tiered:
-    """The process's one :class:`Tiered` of ``module.name`` (shared by every caller)."""
+def entry(module: types.ModuleType, name: str, plain_calls: int = 0) -> Tiered:
+    """The process's one :class:`Tiered` of ``module.name`` (shared by every caller;
+    ``plain_calls`` is the first caller's)."""
     key = (module.__name__, name)
     found = _ENTRIES.get(key)
     if found is None:
-        found = _ENTRIES.setdefault(key, Tiered(module, name))
+        found = _ENTRIES.setdefault(key, Tiered(module, name, plain_calls))
     return found
 
 

@@ -335,7 +335,7 @@ class TickLoop:
             From the simulator; the loop stops.
         """
         try:
-            self.sim.blocks_compiled()  # the compiled tick is loaded before the first deadline
+            self._load_kernels()
             self._emit(self.sim.sample(singular_values=True))
             self._holding = self.options.wait_for_command
             if not self._holding:
@@ -373,6 +373,14 @@ class TickLoop:
                 self.gate.open()
             with self._cv:
                 self._cv.notify_all()
+
+    def _load_kernels(self) -> None:
+        """Load the compiled tick and the kernel before the first deadline (the kernel serves
+        the first sample of an episode, the singular values and a tick that is not a block)."""
+        self.sim.blocks_compiled()
+        warm_up = getattr(self.sim.mechanism, "warm_up", None)
+        if warm_up is not None:
+            warm_up()
 
     def _hold(self) -> None:
         """Keep the initial state until a command arrives, republishing it for late joiners."""
@@ -577,7 +585,7 @@ class TickLoop:
             replacement, self._replacement = self._replacement, None
         if replacement is not None:
             self.sim, self.commands = replacement
-            self.sim.blocks_compiled()
+            self._load_kernels()
             self.pacer.period = self.sim.dt
             self.outputs.rebuilt(self.sim)
         else:

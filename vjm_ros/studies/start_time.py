@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import resource
@@ -130,7 +131,8 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     ``numba`` (the numba package, where the stages before did not import it),
     ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
     entry point :func:`vjm_ros.core.kernels.step` loaded from numba's cache or compiled, while the
-    simulator is built), ``simulator`` (the rest of building it), ``pipeline`` (the compiled
+    simulator is built; 0 where entry points start as plain Python: the kernel is then left to
+    its first calls, :data:`~vjm_ros.core.mechanism.STEP_PLAIN_CALLS`), ``simulator`` (the rest of building it), ``pipeline`` (the compiled
     entry point :func:`vjm_ros.core.pipeline.advance_ticks`, loaded or compiled),
     ``first_tick`` (one tick advanced and sampled), ``compiled`` (from there until the ticks run
     compiled: ticks advance meanwhile as plain Python, in calls of
@@ -166,7 +168,8 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     t = lap("scene", t)
     sim = Simulator(sc.model, settings, sc.gains)
     now = time.perf_counter()
-    times["kernel"] = getattr(sim.mechanism, "warm_up_time", 0.0)
+    warm_up = getattr(sim.mechanism, "warm_up_time", math.nan)
+    times["kernel"] = 0.0 if math.isnan(warm_up) else warm_up  # nan: left to its first calls
     times["simulator"] = now - t - times["kernel"]
     t = now
     sim.blocks_compiled()
