@@ -203,3 +203,41 @@ def test_the_loop_logs_in_blocks_what_it_logged_sample_by_sample(tmp_path):
     assert np.all(np.diff(times) == 1_000_000)
     events = [m for m in got if m[0] == "/vjm_sim_node/events"]
     assert len(events) == 1 and times[137] < events[0][1] == times[138]  # the reset, in order
+
+
+class Collecting:
+    path = "collecting"
+
+    def __init__(self):
+        self.times = []
+
+    def write(self, sample):
+        self.times.append(sample.t)
+
+    def note_reset(self, t):
+        pass
+
+    def close(self):
+        pass
+
+
+def test_a_loop_holding_for_its_first_command_has_logged_its_start_state():
+    scene = load_scene("four_bar")
+    sim = Simulator(scene.model, SimulationSettings(), scene.gains)
+    commands = CommandBuffer(sim.model.actuator_names, sim.model.joint_names, sim.limits, 0.0)
+    rec = Collecting()
+    options = LoopOptions(realtime=False, marker_period=0.0, wait_for_command=True)
+    loop = TickLoop(sim, commands, Ignored(), options, [rec])
+    result = []
+    thread = threading.Thread(target=lambda: result.append(loop.run()))
+    thread.start()
+    try:
+        wait_until(lambda: rec.times == [0.0], "the start state in the log")
+        assert loop.sim.ticks == 0
+        loop.commands.submit_array([1.0])
+        wait_until(lambda: loop.sim.ticks >= 5, "5 ticks")
+    finally:
+        loop.stop()
+        thread.join(10.0)
+    assert result == [STOPPED] and rec.times[:6] == pytest.approx([0.0, 0.001, 0.002, 0.003,
+                                                                   0.004, 0.005])

@@ -34,8 +34,8 @@ CAPACITY = 100
 """Rows per block: 0.1 s at 1 kHz. Per tick an MCAP log then costs about 7 µs (23 µs in blocks
 of 20, 114 µs sample by sample, measured on one slow machine), in one burst per block."""
 MAX_WAIT = 0.1
-"""Longest wall time a row waits for its block to be written, s (what a live rerun viewer
-lags behind at low tick rates)."""
+"""Longest wall time from a block's first row to its hand-over while ticks go on, s (what a live
+rerun viewer lags behind at low tick rates); a loop that stops ticking syncs."""
 
 
 _STOP = object()

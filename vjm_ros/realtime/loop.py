@@ -384,6 +384,7 @@ class TickLoop:
 
     def _hold(self) -> None:
         """Keep the initial state until a command arrives, republishing it for late joiners."""
+        self.log_rows.sync()  # the logs hold the start state meanwhile
         self.gate.open()
         if self.commands.wait_fresh(HOLD_REPUBLISH):
             self._holding = False
