@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
 
 from vjm_ros.logs.mcap_recorder import McapRecorder
 from vjm_ros.logs.rows import LogRows
@@ -203,6 +204,17 @@ def test_the_loop_logs_in_blocks_what_it_logged_sample_by_sample(tmp_path):
     assert np.all(np.diff(times) == 1_000_000)
     events = [m for m in got if m[0] == "/vjm_sim_node/events"]
     assert len(events) == 1 and times[137] < events[0][1] == times[138]  # the reset, in order
+
+    # rosbags, with its own typestore, reads the block-written log: every tick's joint state
+    # carries the effort this test commanded for that tick (per-row efforts), and q the state
+    commanded = [0.0] + [np.sin(0.05 * k) for k in range(137)]  # start state, then tick k
+    commanded += [0.0] + [np.sin(0.05 * k) for k in range(55)]  # efforts cleared by the reset
+    with AnyReader([tmp_path / "blocks.mcap"]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/joint_states"]
+        decoded = [reader.deserialize(raw, c.msgtype)
+                   for c, _, raw in reader.messages(connections=conns)]
+    assert [m.effort[0] for m in decoded] == commanded
+    assert [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in decoded] == times
 
 
 class Collecting:
