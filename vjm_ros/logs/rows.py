@@ -20,14 +20,13 @@ with SIGKILL loses the rows not yet written, at most ``max_wait`` s more than be
 
 from __future__ import annotations
 
-import queue
-import threading
 import time
 from collections.abc import Callable
 
 import numpy as np
 
 from vjm_ros.core.model import Model
+from vjm_ros.logs.background import BlockFanOut, Consumer
 from vjm_ros.sim.simulator import BLOCK_FIELDS, SampleBlock
 
 CAPACITY = 100
@@ -37,8 +36,6 @@ MAX_WAIT = 0.1
 """Longest wall time from a block's first row to its hand-over while ticks go on, s (what a live
 rerun viewer lags behind at low tick rates); a loop that stops ticking syncs."""
 
-
-_STOP = object()
 
 
 class LogRows:
@@ -60,15 +57,15 @@ class LogRows:
     clock : callable
         Monotonic wall time, s.
     depth : int
-        Blocks in circulation: one being filled, the others waiting or being written. When
-        none is free (the logs cannot keep up), :meth:`add` waits for one.
+        Blocks the writing thread circulates (:class:`~vjm_ros.logs.background.BlockFanOut`):
+        when none is free (the logs cannot keep up), :meth:`add` waits for one.
     background : bool
         Write in a thread of its own; False writes in the caller's thread.
 
     Notes
     -----
-    An exception of ``write_block`` is raised again by the next :meth:`add`, :meth:`sync` or
-    :meth:`close`; the rows of that block are lost.
+    An exception of ``write_block`` is raised again, once, by a later hand-over (in
+    :meth:`add`) or by :meth:`sync`; the rows of the blocks after it are not written.
     """
 
     def __init__(self, model: Model, write_block: Callable[[SampleBlock], None],
@@ -81,23 +78,19 @@ class LogRows:
         self._write_block = write_block
         self.max_wait = float(max_wait)
         self._clock = clock
-        self._depth = max(int(depth), 2)
+        self._depth = int(depth)
         self._background = bool(background)
-        self._made = 0
-        self._free: queue.SimpleQueue = queue.SimpleQueue()
-        self._queue: queue.Queue = queue.Queue()
-        self._thread: threading.Thread | None = None
-        self._errors: list[BaseException] = []
+        self._writer: BlockFanOut | None = None
         self._first = 0.0
         self._fill(self._new_block())
 
     def _new_block(self) -> SampleBlock:
-        self._made += 1
         block = SampleBlock(self._model, self._capacity)
         block.effort = np.zeros((self._capacity, self._model.n))
         return block
 
     def _fill(self, block: SampleBlock) -> None:
+        block.rows = 0
         self.block = block
         self._targets = [(getattr(block, key), attr) for key, attr in BLOCK_FIELDS]
 
@@ -108,7 +101,6 @@ class LogRows:
     def add(self, sample) -> None:
         """Copy one tick's :class:`~vjm_ros.sim.simulator.Sample` (geometry included) into the
         block; hand the block over when it is full or its first row has waited ``max_wait``."""
-        self._raise()
         block = self.block
         i = block.rows
         if i == 0:
@@ -129,53 +121,23 @@ class LogRows:
             finally:
                 block.rows = 0
             return
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._serve, name="vjm log writer",
-                                            daemon=True)
-            self._thread.start()
-        self._queue.put(block)
+        if self._writer is None:
+            consumer = Consumer(name="vjm log writer", write=self._write_block)
+            self._writer = BlockFanOut(self._new_block, [consumer], depth=self._depth)
         try:
-            free = self._free.get_nowait()
-        except queue.Empty:
-            free = self._new_block() if self._made < self._depth else self._free.get()
-        self._fill(free)
-
-    def _serve(self) -> None:
-        while True:
-            block = self._queue.get()
-            try:
-                if block is _STOP:
-                    return
-                try:
-                    self._write_block(block)
-                except BaseException as exc:  # noqa: BLE001 - raised again in the tick thread
-                    self._errors.append(exc)
-                finally:
-                    block.rows = 0
-                    self._free.put(block)
-            finally:
-                self._queue.task_done()
+            self._writer.put(block)  # raises an error of an earlier block's writing
+        except BaseException:
+            block.rows = 0  # lost with the log's error
+            raise
+        self._fill(self._writer.take())
 
     def sync(self) -> None:
-        """Hand over the rows added and wait until every one is written."""
+        """Hand over the rows added and wait until every one is written (the writing thread
+        then ends; the next hand-over starts another)."""
         if self.block.rows:
             self._hand_over()
-        if self._thread is not None:
-            self._queue.join()
-        self._raise()
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.close()  # raises an error of the writing, once
 
-    flush = sync
-
-    def close(self) -> None:
-        """:meth:`sync`, then stop the writing thread (a later :meth:`add` starts another)."""
-        try:
-            self.sync()
-        finally:
-            thread, self._thread = self._thread, None
-            if thread is not None:
-                self._queue.put(_STOP)
-                thread.join()
-
-    def _raise(self) -> None:
-        if self._errors:
-            raise self._errors.pop(0)
+    flush = close = sync
