@@ -124,6 +124,7 @@ def test_compiled_functions_are_keyed_on_every_compiled_source():
     cache on the defining file only)."""
     assert Path(small_linalg.__file__).resolve() in jit.COMPILED_SOURCES
     assert Path(kernels.__file__).resolve() in jit.COMPILED_SOURCES
+    jit.activate()  # numba is imported when a compiled function is first needed
     if jit.LOCATORS_INSTALLED:
         locator = kernels.step._cache._impl.locator
         assert locator.get_source_stamp() == jit.sources_stamp()
@@ -136,6 +137,7 @@ def test_numba_starts_without_importing_scipy_linalg():
         "import sys",
         "import numpy as np",
         "from vjm_ros.core import jit",
+        "jit.activate()",  # imports numba, as the first compiled function needed does
         "from numba import njit",
         "from numba.core.registry import cpu_target",
         "cpu_target.target_context.refresh()",  # what numba does before its first load

@@ -78,8 +78,9 @@ def test_plain_copy_computes_the_same_bits(scene, settings, monkeypatch):
 
 def test_plain_copy_reaches_every_compiled_callee():
     """Nothing in the plain copy of the pipeline calls a compiled function (which would compile
-    it in this process, the very wait the plain tier is there to avoid)."""
-    from numba.core.dispatcher import Dispatcher
+    it in this process, the very wait the plain tier is there to avoid), whether the copy was
+    made before numba was imported (the callees deferred) or after (numba's dispatchers)."""
+    from vjm_ros.core.jit import is_compiled
 
     seen, todo = set(), [tiers.interpreted(pipeline.advance_ticks_with_hub)]
     copies = {id(f) for f in tiers._PLAIN.values()}
@@ -90,10 +91,10 @@ def test_plain_copy_reaches_every_compiled_callee():
         seen.add(id(fn))
         for name in fn.__code__.co_names:
             value = fn.__globals__.get(name)
-            assert not isinstance(value, Dispatcher), f"{fn.__qualname__} calls compiled {name}"
+            assert not is_compiled(value), f"{fn.__qualname__} calls compiled {name}"
             if isinstance(value, tiers._Namespace):
                 for attr in value._names.values():
-                    assert not isinstance(attr, Dispatcher)
+                    assert not is_compiled(attr)
                     if id(attr) in copies:
                         todo.append(attr)
             elif id(value) in copies:
@@ -226,6 +227,41 @@ def test_a_run_in_blocks_never_loads_the_kernel(tmp_path):
                           timeout=600, env=env, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.split() == ["0", "new"]
+
+
+def test_a_short_run_never_imports_numba(tmp_path):
+    """numba's cache filled: a run shorter than the pipeline's first call as plain Python (and its
+    CSV shorter than :data:`~vjm_ros.sim.trajectory.CSV_PLAIN_ROWS`) ends without importing numba
+    (0.3-0.4 s with the loading of the pipeline), and writes the same files as the same run
+    compiled first; a longer run imports it after its first ticks and runs compiled."""
+    from vjm_ros.core.mechanism import PLAIN_PART_TICKS
+
+    script = (
+        "import sys\n"
+        "from vjm_ros.app.cli import main\n"
+        "code = main(['run', 'five_bar', '--duration', sys.argv[2], '--out', sys.argv[1]])\n"
+        "from vjm_ros.core import jit\n"
+        "print(code, 'numba' in sys.modules, jit.active())\n")
+
+    def run(folder: Path, seconds: float, tiered: str) -> list[str]:
+        env = {**os.environ, tiers.ENVIRONMENT: tiered}
+        done = subprocess.run([sys.executable, "-c", script, str(folder), str(seconds)],
+                              capture_output=True, text=True, timeout=600, env=env)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done.stdout.split()[-3:]
+
+    _vjm(["run", "five_bar", "--duration", "0.1"], None)  # fills the cache where it is cold
+    short = (PLAIN_PART_TICKS // 2) / 1000.0  # five_bar runs at 1 kHz
+    assert run(tmp_path / "plain", short, "1") == ["0", "False", "False"]
+    assert run(tmp_path / "compiled", short, "0") == ["0", "True", "True"]
+    assert run(tmp_path / "longer", 0.1, "1") == ["0", "True", "True"]
+    for name in ("trajectory.csv", "summary.json"):
+        plain, compiled = ((tmp_path / d / name).read_bytes() for d in ("plain", "compiled"))
+        if name == "summary.json":  # the wall time differs; everything else is the same
+            plain, compiled = (
+                {k: v for k, v in json.loads(x).items() if k not in ("wall_time", "realtime_factor")}
+                for x in (plain, compiled))
+        assert plain == compiled, name
 
 
 def test_compile_server_reports_a_failure():

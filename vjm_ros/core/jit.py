@@ -1,5 +1,15 @@
 """numba's ``njit`` with the project's options, or the plain function where numba is missing.
 
+numba is imported when the first compiled function is needed, not when the package is: until
+then :func:`jit` and :func:`variant` give :class:`Deferred` functions, and :func:`activate`
+(run by the first call of one of them, or by the tiers' loading,
+:mod:`vjm_ros.core.tiers`) imports numba, makes every deferred function's dispatcher and puts
+the dispatchers in the modules' places of the deferred functions. Importing numba and loading the
+kernels from its cache takes 0.3-0.4 s, more than half of a warm ``vjm run``; a run whose first
+ticks run as plain Python (:mod:`vjm_ros.core.tiers`) has its first tick without it, and a
+command that needs a few kernel evaluations only (a one-tick run, a scene's checks) never loads
+numba at all.
+
 numba keys each cached function on the source file that defines it, and does not notice when a
 function it calls from another file changes: a kernel in ``pipeline.py`` would keep running the
 old ``kernels.step`` after an edit of ``kernels.py``. So every function compiled here is keyed on
@@ -14,6 +24,7 @@ import hashlib
 import importlib.machinery
 import importlib.util
 import sys
+import threading
 import types
 from pathlib import Path
 
@@ -47,13 +58,19 @@ def _load_blas_wrappers() -> bool:
     return True
 
 
-try:  # numba is optional: without it the kernels run as plain Python
-    from numba import njit as _njit
+def _numba_installed() -> bool:
+    """Whether numba can be imported (looked up without importing it)."""
+    if "numba" in sys.modules:
+        return sys.modules["numba"] is not None
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):  # pragma: no cover - a broken installation
+        return False
 
-    HAVE_NUMBA = True
-    _load_blas_wrappers()
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    HAVE_NUMBA = False
+
+HAVE_NUMBA = _numba_installed()
+"""Whether numba is installed: compiled functions then run as machine code once it is imported
+(:func:`activate`); otherwise they are the plain functions."""
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 
@@ -108,8 +125,8 @@ def _install_locators() -> bool:
     return True
 
 
-LOCATORS_INSTALLED = HAVE_NUMBA and _install_locators()
-"""Whether compiled functions are keyed on :func:`sources_stamp`."""
+LOCATORS_INSTALLED = False
+"""Whether compiled functions are keyed on :func:`sources_stamp` (set by :func:`activate`)."""
 
 
 def _refcount_free_supported() -> bool:
@@ -122,8 +139,9 @@ def _refcount_free_supported() -> bool:
         return False
 
 
-REFCOUNT_FREE = HAVE_NUMBA and _refcount_free_supported()
-"""Whether functions that create no arrays are compiled without numba's reference counting."""
+REFCOUNT_FREE = False
+"""Whether functions that create no arrays are compiled without numba's reference counting (set
+by :func:`activate`)."""
 
 
 def _load_without_registries(cache, sig, target_context):
@@ -151,8 +169,138 @@ def _loads_lazily(dispatcher) -> None:
         cache.load_overload = functools.partial(_load_without_registries, cache)
 
 
+# ---------------------------------------------------------------------------- deferred numba
+class Deferred:
+    """A function to be compiled by numba, before numba is imported.
+
+    Called, or asked for anything a numba dispatcher has (``signatures``, ``compile``...), it
+    imports numba (:func:`activate`) and hands over to its dispatcher. ``py_func`` is the plain
+    function, as a dispatcher's is.
+    """
+
+    def __init__(self, fn, options: dict):
+        self.py_func = fn
+        self.vjm_options = options
+        self.dispatcher = None
+        for name in ("__name__", "__qualname__", "__doc__", "__module__"):
+            setattr(self, name, getattr(fn, name, None))
+
+    def __call__(self, *args):
+        return compiled(self)(*args)
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        return getattr(compiled(self), name)
+
+    def __repr__(self) -> str:
+        return f"<deferred compiled function {self.__qualname__}>"
+
+
+_DEFERRED: list[Deferred] = []
+_ACTIVE = False
+_ACTIVATING = threading.RLock()
+
+
+def is_compiled(obj) -> bool:
+    """Whether ``obj`` is a compiled function: a numba dispatcher or a :class:`Deferred`."""
+    if isinstance(obj, Deferred):
+        return True
+    dispatcher = sys.modules.get("numba.core.dispatcher")
+    return dispatcher is not None and isinstance(obj, dispatcher.Dispatcher)
+
+
+def compiled(obj):
+    """The dispatcher of a :class:`Deferred` (importing numba now if need be), ``obj`` itself
+    for anything else."""
+    if not isinstance(obj, Deferred):
+        return obj
+    if obj.dispatcher is None:
+        activate()
+    return obj.dispatcher
+
+
+def active() -> bool:
+    """Whether :func:`activate` has run (numba imported, where it is installed)."""
+    return _ACTIVE
+
+
+def _options(options: dict) -> dict:
+    """numba's options for the project's (``allocates``, ``inline``)."""
+    numba_options = {"cache": True, "nogil": True, "error_model": "numpy",
+                     "inline": options["inline"]}
+    if not options["allocates"] and REFCOUNT_FREE:
+        numba_options["_nrt"] = False
+    return numba_options
+
+
+def _make(fn, options: dict):
+    """The dispatcher of ``fn``, or ``fn`` itself where numba is missing."""
+    if not HAVE_NUMBA:
+        return fn
+    from numba import njit
+
+    dispatcher = njit(**_options(options))(fn)
+    _loads_lazily(dispatcher)
+    dispatcher.vjm_options = options
+    return dispatcher
+
+
+def _rebind(names: dict) -> None:
+    """Put dispatchers in the places of the deferred functions among ``names`` (globals)."""
+    for key, value in list(names.items()):
+        if isinstance(value, Deferred) and value.dispatcher is not None:
+            names[key] = value.dispatcher
+
+
+def activate() -> bool:
+    """Import numba, make the dispatcher of every :class:`Deferred` and put it in the deferred
+    function's place in the modules' globals (and in the namespaces of :func:`variant` copies),
+    so that numba, typing a function, finds its compiled callees. Functions made after this are
+    compiled functions at once. Returns :data:`HAVE_NUMBA`; where numba fails to import, the
+    plain functions take the deferred ones' places."""
+    global _ACTIVE, HAVE_NUMBA, LOCATORS_INSTALLED, REFCOUNT_FREE
+    with _ACTIVATING:
+        if _ACTIVE:
+            return HAVE_NUMBA
+        if HAVE_NUMBA:
+            _load_blas_wrappers()
+            try:
+                import numba  # noqa: F401
+            except ImportError:  # pragma: no cover - installed but broken
+                HAVE_NUMBA = False
+        if HAVE_NUMBA:
+            LOCATORS_INSTALLED = _install_locators()
+            REFCOUNT_FREE = _refcount_free_supported()
+        for deferred in _DEFERRED:
+            deferred.dispatcher = _make(deferred.py_func, deferred.vjm_options)
+        spaces = {id(d.py_func.__globals__): d.py_func.__globals__ for d in _DEFERRED}
+        spaces.update((id(vars(m)), vars(m)) for name, m in list(sys.modules.items())
+                      if m is not None and (name == "vjm_ros" or name.startswith("vjm_ros.")))
+        for names in spaces.values():
+            _rebind(names)
+        _DEFERRED.clear()
+        _ACTIVE = True
+        return HAVE_NUMBA
+
+
+def _new(fn, options: dict):
+    """A compiled function of ``fn``: its dispatcher once numba is active, else deferred."""
+    with _ACTIVATING:
+        if _ACTIVE:
+            return _make(fn, options)
+        if not HAVE_NUMBA:
+            return fn
+        deferred = Deferred(fn, options)
+        _DEFERRED.append(deferred)
+        return deferred
+
+
 def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged.
+
+    Before numba is imported (:func:`activate`) the result is a :class:`Deferred` that stands for
+    the compiled function until then.
 
     ``allocates=False`` declares that ``fn`` (and everything it calls) creates no arrays, only
     reads and writes the ones it is given: it is then compiled without numba's reference
@@ -170,20 +318,12 @@ def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     """
     if fn is None:
         return functools.partial(jit, allocates=allocates, inline=inline)
-    if not HAVE_NUMBA:
-        return fn
-    options = {"cache": True, "nogil": True, "error_model": "numpy", "inline": inline}
-    if not allocates and REFCOUNT_FREE:
-        options["_nrt"] = False
-    dispatcher = _njit(**options)(fn)
-    _loads_lazily(dispatcher)
-    dispatcher.vjm_options = options
-    return dispatcher
+    return _new(fn, {"allocates": allocates, "inline": inline})
 
 
-def variant(compiled, name: str, *, inline: str | None = None, **constants):
-    """A second compiled copy of ``compiled`` (made by :func:`jit`) that reads ``constants`` in
-    place of its module's globals of those names, under the name ``name``; ``inline``, when
+def variant(compiled_fn, name: str, *, inline: str | None = None, **constants):
+    """A second compiled copy of ``compiled_fn`` (made by :func:`jit`) that reads ``constants``
+    in place of its module's globals of those names, under the name ``name``; ``inline``, when
     given, replaces its ``inline`` option (``"always"``: a copy that numba inlines into each
     compiled caller, see :func:`jit`).
 
@@ -194,7 +334,7 @@ def variant(compiled, name: str, *, inline: str | None = None, **constants):
     name). Globals are read when the copy is made: make it at the end of the module.
     Without numba, the copy is the plain function with those globals.
     """
-    fn = getattr(compiled, "py_func", compiled)
+    fn = getattr(compiled_fn, "py_func", compiled_fn)
     missing = [k for k in constants if k not in fn.__globals__]
     if missing:
         raise KeyError(f"{fn.__qualname__}: no module global named {missing}")
@@ -204,12 +344,9 @@ def variant(compiled, name: str, *, inline: str | None = None, **constants):
     copy.__qualname__ = name
     copy.__doc__ = fn.__doc__
     copy.__module__ = fn.__module__
-    if not HAVE_NUMBA:
+    if not is_compiled(compiled_fn):
         return copy
-    options = dict(compiled.vjm_options)
+    options = dict(compiled_fn.vjm_options)
     if inline is not None:
         options["inline"] = inline
-    dispatcher = _njit(**options)(copy)
-    _loads_lazily(dispatcher)
-    dispatcher.vjm_options = options
-    return dispatcher
+    return _new(copy, options)

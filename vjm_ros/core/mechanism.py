@@ -181,7 +181,8 @@ class Mechanism:
         self._step = tiers.entry(K, "step_with_hub" if hub else "step",
                                  plain_calls=STEP_PLAIN_CALLS)
         self._advance_ticks = tiers.entry(
-            pipeline, "advance_ticks_with_hub" if hub else "advance_ticks")
+            pipeline, "advance_ticks_with_hub" if hub else "advance_ticks",
+            plain_calls=PIPELINE_PLAIN_CALLS)
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         self.model = model
@@ -521,6 +522,8 @@ class Mechanism:
         """Compile the block pipeline (:mod:`vjm_ros.core.pipeline`), or load it from numba's
         cache, with a call of zero ticks. Returns the wall time spent, s."""
         start = time.perf_counter()
+        if type(self._advance_ticks) is tiers.Tiered:
+            self._advance_ticks.eager()
         model = self.model
         q, qd = model.initial_state()
         links = np.array([p.ref.link for p in model.points], dtype=np.int64)
@@ -572,12 +575,23 @@ class Mechanism:
             q, qd = out[0][done - 1], out[1][done - 1]
 
 
-STEP_PLAIN_CALLS = 8
+STEP_PLAIN_CALLS = 64
 """Calls of the kernel (:func:`vjm_ros.core.kernels.step`) that run as plain Python before it is
 loaded from numba's cache (:class:`vjm_ros.core.tiers.Tiered`): one evaluation of the thesis
-scenes takes 0.2-0.5 ms as plain Python, the load 70-120 ms on a slow machine. ``vjm run`` makes
-three such calls besides its block pipeline (the scene's inertia check, its assembly, the
-mobility check)."""
+scenes takes 0.2-0.5 ms as plain Python, the load 70-120 ms on a slow machine, and 0.3-0.4 s
+where it is the first compiled function a process needs (numba imported with it,
+:func:`vjm_ros.core.jit.activate`). ``vjm run`` makes 8-11 such calls besides its block pipeline
+(the scene's inertia check, its assembly, the mobility check, the first sample); ``vjm scenes``
+about 20."""
+
+
+PIPELINE_PLAIN_CALLS = 1
+"""Calls of the block pipeline (:func:`vjm_ros.core.pipeline.advance_ticks`) that run as plain
+Python, :data:`PLAIN_PART_TICKS` ticks at most each, before it is loaded from numba's cache
+(:class:`vjm_ros.core.tiers.Tiered`), where entry points start as plain Python: a run's first
+ticks then come before numba is imported at all (0.3-0.4 s with the loading of the pipeline,
+against 10-20 ms for the plain ticks), and a run of that many ticks never imports it.
+:meth:`Mechanism.warm_up_pipeline` loads it at once."""
 
 
 PLAIN_PART_TICKS = 20

@@ -5,8 +5,11 @@ upgrading, a new ``NUMBA_CACHE_DIR``), compiling :func:`vjm_ros.core.kernels.ste
 pipeline (with its inlined copy of the step) takes 15-40 s on a 2-core machine. :class:`Tiered`
 wraps such a compiled entry point:
 
-1. its first call looks into numba's cache; when the compiled code is there (the usual case) it
-   is loaded and every call goes to it, as without this module;
+1. its first call (after its first ``plain_calls``, which run the plain copy below: numba and
+   the compiled code take longer to load than a few plain-Python calls take to run) looks into
+   numba's cache, importing numba if no compiled function was needed before
+   (:func:`vjm_ros.core.jit.activate`); when the compiled code is there (the usual case) it is
+   loaded and every call goes to it, as without this module;
 2. otherwise the entry point is handed to a compile server, one child process per run
    (``python -m vjm_ros.core.tiers``, at a lower priority, on the other core), and calls run
    the function's plain-Python copy (:func:`interpreted`: the same source with every compiled
@@ -37,10 +40,7 @@ import threading
 import time
 import types
 
-try:
-    from numba.core.dispatcher import Dispatcher
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    Dispatcher = ()
+from vjm_ros.core import jit
 
 ENVIRONMENT = "VJM_TIERED"
 """Environment variable: ``0`` compiles in the calling process (no plain-Python tier)."""
@@ -95,7 +95,7 @@ def _plain_globals(names: dict) -> dict:
         return copy
     copy = _GLOBALS[id(names)] = dict(names)
     for key, value in names.items():
-        if isinstance(value, Dispatcher):
+        if jit.is_compiled(value):
             copy[key] = interpreted(value)
         elif isinstance(value, types.ModuleType) and _is_ours(value):
             space = _MODULES.get(id(value))
@@ -110,7 +110,7 @@ def interpreted(function):
     reaches (through its module's globals, a module, or a copy made by
     :func:`vjm_ros.core.jit.variant`) replaced by that function's plain copy. A function that is
     not compiled (numba missing, ``NUMBA_DISABLE_JIT``) is returned as it is."""
-    if not isinstance(function, Dispatcher):
+    if not jit.is_compiled(function):
         return function
     copy = _PLAIN.get(id(function))
     if copy is None:
@@ -128,12 +128,14 @@ def interpreted(function):
 # ---------------------------------------------------------------------------- numba's cache
 def signature(dispatcher, args: tuple) -> tuple:
     """numba's argument types for a call with ``args`` (what the dispatcher itself computes)."""
+    dispatcher = jit.compiled(dispatcher)
     return tuple(dispatcher.typeof_pyval(a) for a in args)
 
 
 def load_cached(dispatcher, args: tuple) -> bool:
     """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
     this process already, or loaded now from numba's cache (as numba's own first call does)."""
+    dispatcher = jit.compiled(dispatcher)
     sig = signature(dispatcher, args)
     if sig in dispatcher.overloads:
         return True
@@ -279,7 +281,7 @@ class Tiered:
         self.compiled = getattr(module, name)
         self.module = module.__name__
         self.name = name
-        self._ready = not isinstance(self.compiled, Dispatcher)
+        self._ready = not jit.is_compiled(self.compiled)
         self._request: int | None = None
         self._plain = None
         self._plain_left = max(int(plain_calls), 0)
@@ -289,6 +291,11 @@ class Tiered:
         if self._ready:
             return self.compiled(*args)
         return self._call(args)
+
+    def _resolve(self) -> None:
+        """The dispatcher in place of the :class:`~vjm_ros.core.jit.Deferred` function (numba
+        imported now if it was not)."""
+        self.compiled = jit.compiled(self.compiled)
 
     @property
     def ready(self) -> bool:
@@ -318,10 +325,15 @@ class Tiered:
         with self._lock:
             if self._ready or self._request is not None:
                 return
-            if not enabled() or load_cached(self.compiled, args):
-                self._ready = True
-                return
-            self._request = server().request(self.module, self.name, args)
+            start = time.perf_counter()
+            try:
+                self._resolve()
+                if not enabled() or load_cached(self.compiled, args):
+                    self._ready = True
+                    return
+                self._request = server().request(self.module, self.name, args)
+            finally:
+                _LOADING.seconds = loading_seconds() + time.perf_counter() - start
 
     def _call(self, args: tuple):
         if self._plain_left > 0 and self._request is None and enabled():
@@ -333,6 +345,16 @@ class Tiered:
         if self._plain is None:
             self._plain = interpreted(self.compiled)
         return self._plain(*args)
+
+
+_LOADING = threading.local()
+
+
+def loading_seconds() -> float:
+    """Wall time the calling thread has spent in :meth:`Tiered.prepare` so far, s: importing
+    numba, loading entry points from its cache, handing them to the compile server. ``vjm run``
+    leaves it out of a run's ``wall_time``, as it did when the loading came before its clock."""
+    return getattr(_LOADING, "seconds", 0.0)
 
 
 _ENTRIES: dict[tuple[str, str], Tiered] = {}
@@ -381,6 +403,7 @@ def serve() -> int:
             return 0
         number, module, name, args = pickle.loads(frame)
         try:
+            jit.activate()
             dispatcher = getattr(importlib.import_module(module), name)
             dispatcher.compile(signature(dispatcher, args))
             answer = f"ok {number}"

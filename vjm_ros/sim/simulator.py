@@ -298,12 +298,18 @@ class Simulator:
         self.q, self.qd = q, qd
         self._guard()
 
-    def blocks_compiled(self) -> bool:
+    def runs_blocks(self) -> bool:
         """True when :meth:`advance_block` runs in one compiled call (a fixed-step integrator on
-        the compiled kernel); loads that pipeline now (compiled on first use on a machine, then
-        from numba's cache in a few tens of ms), so that a timed run does not pay for it."""
-        if getattr(self.integrator, "kernel_method", None) is None or not hasattr(
-                self.mechanism, "warm_up_pipeline"):
+        the compiled kernel); loads nothing (the pipeline's first ticks may run as plain Python,
+        :mod:`vjm_ros.core.tiers`)."""
+        return getattr(self.integrator, "kernel_method", None) is not None and hasattr(
+            self.mechanism, "warm_up_pipeline")
+
+    def blocks_compiled(self) -> bool:
+        """True when :meth:`advance_block` runs in one compiled call (:meth:`runs_blocks`); loads
+        that pipeline now (compiled on first use on a machine, then from numba's cache in a few
+        tens of ms), so that a timed run or a realtime loop does not pay for it."""
+        if not self.runs_blocks():
             return False
         if not getattr(self, "_pipeline_ready", False):
             self.mechanism.warm_up_pipeline()
@@ -331,7 +337,7 @@ class Simulator:
         """
         block.effort = self.tau.copy()
         block.rows = 0
-        if ticks == 0 or not self.blocks_compiled():
+        if ticks == 0 or not self.runs_blocks():
             self._advance_tick_by_tick(block, 0, ticks)
             return
         arrays = (block.arrays if ticks == len(block.t)

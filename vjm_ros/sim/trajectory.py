@@ -276,6 +276,12 @@ def csv_rows(table: np.ndarray) -> str:
     return csv_bytes(table).decode("ascii")
 
 
+CSV_PLAIN_ROWS = 500
+"""Tables of fewer rows are written by ``repr`` until the compiled writer is in use, where entry
+points start as plain Python (:mod:`vjm_ros.core.tiers`): 500 rows of the thesis scenes take a
+few ms so, importing numba and loading the writer 0.3-0.4 s; a short run never imports numba."""
+
+
 def csv_bytes(table: np.ndarray) -> bytes:
     """CSV rows of ``table`` as ASCII bytes (see :func:`csv_rows`).
 
@@ -283,13 +289,14 @@ def csv_bytes(table: np.ndarray) -> bytes:
     without holding the GIL); else the nested list's ``repr`` is split at ``"], ["`` and
     ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
     bracket or space): the same text. The latter also while numba compiles the former in the
-    background (:mod:`vjm_ros.core.tiers`).
+    background (:mod:`vjm_ros.core.tiers`), and for tables of fewer than
+    :data:`CSV_PLAIN_ROWS` rows before it is loaded.
     """
     if len(table) == 0:
         return b""
     if float_text.COMPILED:
         compiled = tiers.entry(float_text, "_csv")
-        if not compiled.ready:
+        if not compiled.ready and (len(table) >= CSV_PLAIN_ROWS or not tiers.enabled()):
             compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
         if compiled.ready:
             return float_text.csv_bytes(table)

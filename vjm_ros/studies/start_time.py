@@ -14,9 +14,14 @@
 4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
    tick (``duration:=0.001``), rclpy start and shutdown included, median of ``repeats``;
 5. **breakdown**, warm and cold: in a fresh process, the wall time of each start stage
-   (:func:`stages`: imports, each compiled entry point loaded from the
-   cache or compiled, the first tick, and cold the time until the ticks run compiled), and from ``python -X importtime`` the import time of each
-   top-level package (self times summed; ``-X importtime`` itself slows imports a little).
+   (:func:`stages`: imports, the first tick, numba's import, and the time until the ticks run
+   compiled: the pipeline loaded from the cache warm, compiled in the background cold), and
+   from ``python -X importtime`` the import time of each top-level package (self times summed;
+   ``-X importtime`` itself slows imports a little).
+
+Where numba's cache holds the kernels, the first ticks of a run are plain Python all the same
+(:data:`vjm_ros.core.mechanism.PIPELINE_PLAIN_CALLS`), and numba is imported after them: a
+one-tick run never imports it, and a longer run's first tick comes as soon.
 
 With ``--docs`` it writes the figures as the page's start-time section (:data:`HEADING`; the bench
 keeps that section when it rewrites the page). Issue targets: warm at most 0.5 s, cold at most
@@ -124,19 +129,21 @@ def warm_imports(scene: str) -> dict[str, float]:
 def stages(scene: str) -> tuple[dict[str, float], int]:
     """Wall time of each stage of a start in this process, in order, s, and the ticks run as
     plain Python after the first one until the ticks ran compiled (0 when the compiled code was
-    loaded before the first tick).
+    loaded at the first call after the first tick).
 
     Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator,
     :mod:`vjm_ros.app.cli` itself aside: the studies do not import the app layer),
-    ``numba`` (the numba package, where the stages before did not import it),
     ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
     entry point :func:`vjm_ros.core.kernels.step` loaded from numba's cache or compiled, while the
     simulator is built; 0 where entry points start as plain Python: the kernel is then left to
-    its first calls, :data:`~vjm_ros.core.mechanism.STEP_PLAIN_CALLS`), ``simulator`` (the rest of building it), ``pipeline`` (the compiled
-    entry point :func:`vjm_ros.core.pipeline.advance_ticks`, loaded or compiled),
-    ``first_tick`` (one tick advanced and sampled), ``compiled`` (from there until the ticks run
-    compiled: ticks advance meanwhile as plain Python, in calls of
-    :data:`~vjm_ros.core.mechanism.PLAIN_PART_TICKS`; 0 when the compiled code was loaded).
+    its first calls, :data:`~vjm_ros.core.mechanism.STEP_PLAIN_CALLS`), ``simulator`` (the rest of
+    building it), ``first_tick`` (one tick advanced and sampled: as plain Python where entry points
+    start so, :data:`~vjm_ros.core.mechanism.PIPELINE_PLAIN_CALLS`), ``numba`` (numba imported and
+    the compiled functions made, :func:`vjm_ros.core.jit.activate`, which the next call of the
+    pipeline would do), ``compiled`` (from there until the ticks run compiled: the pipeline
+    :func:`vjm_ros.core.pipeline.advance_ticks` loaded from numba's cache, or, cold, compiled in
+    the background while ticks advance as plain Python, in calls of
+    :data:`~vjm_ros.core.mechanism.PLAIN_PART_TICKS`).
 
     Run it in a fresh process: modules imported and functions loaded before are not counted.
     """
@@ -152,17 +159,13 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
 
     import vjm_ros.logs.signals  # noqa: F401
     import vjm_ros.logs.storage  # noqa: F401
+    from vjm_ros.core import jit
     from vjm_ros.scene.loader import load_scene
     from vjm_ros.sim.settings import resolve_settings
     from vjm_ros.sim.simulator import SampleBlock, Simulator
     from vjm_ros.sim.trajectory import Trajectory
 
     t = lap("import", t)
-    try:
-        import numba.core.registry  # noqa: F401
-    except ImportError:  # no numba: the kernels run as plain Python, nothing to load
-        pass
-    t = lap("numba", t)
     sc = load_scene(scene)
     settings = resolve_settings(sc.defaults, sc.gains)
     t = lap("scene", t)
@@ -172,20 +175,20 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     times["kernel"] = 0.0 if math.isnan(warm_up) else warm_up  # nan: left to its first calls
     times["simulator"] = now - t - times["kernel"]
     t = now
-    sim.blocks_compiled()
-    t = lap("pipeline", t)
     traj = Trajectory(sc.model, capacity=3)
     block = SampleBlock(sc.model, 1)
     sim.advance_block(block, 1)
     traj.extend(block)
     t = lap("first_tick", t)
+    jit.activate()
+    t = lap("numba", t)
     deadline = t + TIMEOUT
-    plain_ticks = 0
+    calls = 0
     while sim.mechanism.tier != "compiled" and time.perf_counter() < deadline:
         sim.advance_block(block, 1)
-        plain_ticks += 1
+        calls += 1
     lap("compiled", t)
-    return times, plain_ticks
+    return times, max(calls - 1, 0)  # the last call ran compiled
 
 
 def stages_in_process(scene: str, cache: str | None) -> tuple[dict[str, float], int]:
@@ -275,10 +278,13 @@ def render_section(row: dict, when: str) -> str:
         *([f"| node warm (`vjm_sim_node`, one tick, rclpy included) | {row['node_warm_s']:.2f} | "
            f"{row['node_warm_cpu_s']:.2f} | – |"] if "node_warm_s" in row else []),
         "",
-        "Stages in a fresh process (s; `kernel`: `kernels.step`, `pipeline`: "
-        "`pipeline.advance_ticks`, each loaded from numba's cache or compiled; numba's own "
-        "typing and lowering tables are loaded only when something is compiled; `compiled`: "
-        "from the first tick until the ticks run compiled, plain Python meanwhile):",
+        "Stages in a fresh process (s; `first_tick`: as plain Python, before numba is imported; "
+        "`numba`: numba imported and the compiled functions made; `compiled`: until the ticks "
+        "run compiled, the block pipeline `pipeline.advance_ticks` loaded from numba's cache "
+        "(warm) or compiled in the background while the ticks run as plain Python (cold); "
+        "numba's own typing and lowering tables are loaded only when something is compiled). "
+        "A run's first tick comes after the stages up to `first_tick`, whatever its length; "
+        "a one-tick run ends there:",
         "",
         "| stage | " + " | ".join(warm) + " |",
         "|---|" + "---|" * len(warm),
