@@ -264,7 +264,8 @@ def render_section(row: dict, when: str) -> str:
         f"`vjm run {row['scene']} --duration 0.001` (one control tick), median of "
         f"{len(row['warm_runs_s'])} runs warm (numba's cache filled) and of "
         f"{len(row['cold_runs_s'])} cold (an empty `NUMBA_CACHE_DIR`: the kernels run as plain "
-        "Python while a child process compiles them, `vjm_ros.core.tiers`), and one cold with "
+        "Python, and a run longer than its first ticks has a child process compile them, "
+        "`vjm_ros.core.tiers`; a one-tick run ends before that), and one cold with "
         "`VJM_TIERED=0` (every compiled entry point compiled before the first tick); "
         f"`python -c pass` takes {row['floor_s']:.2f} s.",
         "",
