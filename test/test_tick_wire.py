@@ -65,3 +65,64 @@ def test_a_stamp_is_refilled_for_every_message_each_time():
     for stamp in (joint.header.stamp, clock.clock, wrench.header.stamp):
         assert (stamp.sec, stamp.nanosec) == (2, 250_000_000)
     assert (wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.torque.z) == (1.0, 2.0, 3.0)
+
+
+@pytest.mark.parametrize("scene_name", ["three_chain", "five_bar", "pendulum"])
+def test_refilled_markers_read_back_as_fresh_markers(scene_name):
+    """``~/markers`` refilled by :class:`~vjm_ros.ros.wire.MarkerWire` read back by rclpy as the
+    MarkerArray built from scratch with rclpy's message classes (:func:`conv.markers`), over a
+    run whose tip traces fill up and are cleared by a reset (time going back)."""
+    from visualization_msgs.msg import MarkerArray
+
+    from vjm_ros.ros.wire import MarkerWire
+
+    scene = load_scene(scene_name)
+    model = scene.model
+    sim = Simulator(model, SimulationSettings(), scene.gains)
+    if model.actuators:
+        sim.set_efforts([a.effort for a in model.actuators])
+    wire = MarkerWire()
+    trace = conv.TipTrace(len(model.chains), length=6, spacing=0.002)
+    layouts = set()
+    checked = 0
+    for episode in range(2):
+        sim.reset()
+        for tick in range(25):
+            sim.advance()
+            s = sim.sample()
+            trace.add(s)
+            strips = trace.strips()
+            t = s.t + 1e-4 * episode
+            raw = wire.markers(s, t, strips)
+            # the colors are float32 on the wire: the fresh message goes through rclpy's
+            # serializer too, as publishing it would
+            fresh = deserialize_message(serialize_message(conv.markers(s, t, strips)), MarkerArray)
+            assert deserialize_message(raw, MarkerArray) == fresh, tick
+            layouts.add(wire._key)
+            checked += 1
+    assert checked == 50
+    # the traces keep one length: one layout for the whole run (two with no closure arrows
+    # and no named points would be the same), so the template is written once
+    assert len(layouts) == 1
+
+
+def test_tip_trace_keeps_the_last_positions_oldest_first():
+    """The ring of :class:`conv.TipTrace`: the first position fills the strip, later ones push
+    the oldest out, a reset (time going back) starts over."""
+    import numpy as np
+
+    class _S:
+        def __init__(self, t, x):
+            self.t, self.points = t, np.array([[x, -x]])
+
+    trace = conv.TipTrace(1, length=4, spacing=1.0)
+    assert trace.strips()[0].shape == (0, 2)
+    trace.add(_S(0.0, 1.0))
+    np.testing.assert_array_equal(trace.strips()[0][:, 0], [1, 1, 1, 1])
+    trace.add(_S(0.5, 9.0))  # less than spacing after the last kept one: skipped
+    for t, x in ((1.0, 2.0), (2.0, 3.0), (3.0, 4.0), (4.0, 5.0)):
+        trace.add(_S(t, x))
+    np.testing.assert_array_equal(trace.strips()[0][:, 0], [2, 3, 4, 5])
+    np.testing.assert_array_equal(trace.strips()[0][:, 1], [-2, -3, -4, -5])
+    trace.add(_S(0.0, 7.0))  # a reset
+    np.testing.assert_array_equal(trace.strips()[0][:, 0], [7, 7, 7, 7])

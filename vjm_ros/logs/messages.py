@@ -330,7 +330,8 @@ def marker_specs(
     return specs
 
 
-def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float = LINE_WIDTH) -> dict:
+def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float = LINE_WIDTH,
+            trace: Sequence[np.ndarray] = ()) -> dict:
     """``visualization_msgs/MarkerArray`` drawing the mechanism (:func:`marker_specs`).
 
     Parameters
@@ -342,12 +343,14 @@ def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float
         Arrow length per newton, m/N.
     line_width : float
         Link line width, m.
+    trace : sequence of ndarray, shape (m, 2)
+        Recent positions of each chain tip, m (the node's ``tip_trace`` markers).
     """
     return {
         "markers": [
             marker(ns, namespace, marker_id, kind, points, scale, _rgba(*rgba))
             for namespace, marker_id, kind, points, scale, rgba in marker_specs(
-                sample, force_scale, line_width
+                sample, force_scale, line_width, trace
             )
         ]
     }

@@ -64,10 +64,11 @@ SERVICE_TURN = 0.01
 """While the loop takes the commands itself (:attr:`TickLoop.poll_inputs`), the longest the
 executor goes without its minimal turn when the loop runs behind, wall s: services and parameter
 changes still get through within it, and catch-up ticks do not each wait ``GATE_MIN_OPEN``."""
-SIGMA_PERIOD = 0.01
+SIGMA_PERIOD = 0.05
 """Simulated seconds between two evaluations of the closure Jacobian's smallest singular value
-(for ``/diagnostics``): an SVD per tick would cost a fifth of a tick's CPU for a figure reported
-once a second, and a singular pose is approached over many ticks."""
+(for ``/diagnostics``, which reports the smallest of each second): one costs 0.1 ms here (a kernel
+call and an SVD), a tick's CPU; every 10 ms it was 8 % of the node's CPU in fast mode, for a
+figure reported once a second of a pose that changes over many ticks."""
 HOLD_REPUBLISH = 0.1
 """Period of the joint state republished while waiting for the first command, wall s."""
 PAUSE_WAIT = 5.0

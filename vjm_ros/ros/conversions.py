@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import array
 import math
-from collections import deque
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -280,6 +279,11 @@ def _marker(when: Time, namespace: str, marker_id: int, kind: int, points: np.nd
 class TipTrace:
     """Recent positions of the chain tips, for the trace marker.
 
+    The last ``length`` positions of each tip, kept ``spacing`` simulated seconds apart, in a
+    ring. Until ``length`` positions are kept the first one fills the rest: a strip always has
+    ``length`` points once it has one (the first drawn again, where there were fewer), so the
+    markers message keeps one layout and the node refills it (:class:`vjm_ros.ros.wire.MarkerWire`).
+
     Parameters
     ----------
     count : int
@@ -293,7 +297,9 @@ class TipTrace:
     def __init__(self, count: int, length: int = 100, spacing: float = 0.05):
         self.count = count
         self.spacing = spacing
-        self._points: list[deque] = [deque(maxlen=length) for _ in range(count)]
+        self._ring = np.zeros((count, max(int(length), 2), 2))
+        self._head = 0  # where the next position goes: the oldest one
+        self._empty = True
         self._next = -math.inf
 
     def add(self, sample: Sample) -> None:
@@ -303,18 +309,28 @@ class TipTrace:
         if sample.t + 1e-12 < self._next:
             return
         self._next = sample.t + self.spacing
-        for trace, p in zip(self._points, sample.points[: self.count], strict=True):
-            trace.append((float(p[0]), float(p[1])))
+        tips = np.asarray(sample.points[: self.count], dtype=float)
+        if self._empty:
+            self._ring[:] = tips[:, None, :]
+            self._empty = False
+            self._head = 0
+            return
+        self._ring[:, self._head] = tips
+        self._head = (self._head + 1) % self._ring.shape[1]
 
     def clear(self) -> None:
         """Forget every position."""
-        for trace in self._points:
-            trace.clear()
+        self._empty = True
+        self._head = 0
         self._next = -math.inf
 
     def strips(self) -> list[np.ndarray]:
-        """One array of shape (m, 2) per tip, oldest first, m."""
-        return [np.array(list(trace)).reshape(-1, 2) for trace in self._points]
+        """One array of shape (length, 2) per tip, oldest first (none kept yet: (0, 2)), m."""
+        if self._empty:
+            return [np.zeros((0, 2)) for _ in range(self.count)]
+        ring, head = self._ring, self._head
+        ordered = np.concatenate((ring[:, head:], ring[:, :head]), axis=1)
+        return list(ordered)
 
 
 def markers(

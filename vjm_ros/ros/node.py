@@ -98,7 +98,7 @@ from vjm_ros.realtime.parameters import (
 )
 from vjm_ros.ros import conversions as conv
 from vjm_ros.ros.runtime import PolledGroup, Spinner, StopOnSignals, raise_priority, take_all
-from vjm_ros.ros.wire import TickWire
+from vjm_ros.ros.wire import MarkerWire, TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.simulator import Sample, Simulator
@@ -310,6 +310,7 @@ class SimNode(Node):
                     WrenchStamped, conv.wrench_topic(name), 10)
         self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
         self._wire = TickWire(self._joint_names, self._closure_names)
+        self._marker_wire = MarkerWire()
         self._trace = conv.TipTrace(len(model.chains))
 
     # ------------------------------------------------------------------ outputs (loop thread)
@@ -345,7 +346,7 @@ class SimNode(Node):
     def markers(self, sample: Sample, t: float) -> None:
         """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
         self._trace.add(sample)
-        self._markers_pub.publish(conv.markers(sample, t, self._trace.strips()))
+        self._markers_pub.publish(self._marker_wire.markers(sample, t, self._trace.strips()))
 
     def diagnostics(self, report: dict, paused: bool, level: int | None = None,
                     message: str | None = None) -> None:
