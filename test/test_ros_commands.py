@@ -340,6 +340,59 @@ def test_pacer_sleeps_then_spins_to_the_deadline():
     assert clock.t - start == pytest.approx(0.01, abs=1e-4)
 
 
+class OvershootingClock(TickingClock):
+    """A fake clock whose sleeps last longer than asked, by ``overshoots`` in turn (s); each
+    reading advances it by 1 us (a spinning loop reads it until the deadline)."""
+
+    def __init__(self, overshoots):
+        super().__init__(1e-6)
+        self.overshoots = overshoots
+        self.count = 0
+
+    def sleep(self, dt):
+        extra = self.overshoots[self.count % len(self.overshoots)]
+        self.count += 1
+        super().sleep(dt + extra)
+
+
+def test_the_margin_follows_the_sleeps_overshoot():
+    """By default the margin settles on the 75th percentile of the overshoots plus a guard of
+    10 us. Overshoots spread evenly over 50-250 us: the margin settles near 200 + 10 us, the ticks
+    after one sleep in five (those beyond 210 us) start late by at most 40 us, none early (the
+    loop spins to the deadline); a machine that sleeps precisely ends with the least margin."""
+    overshoots = list(np.linspace(50e-6, 250e-6, 201))
+    np.random.default_rng(3).shuffle(overshoots)
+    clock = OvershootingClock(overshoots)
+    p = Pacer(0.001, clock=clock, sleep=clock.sleep)
+    assert p.adaptive and p.margin == pytest.approx(2e-4)
+    lateness = []
+    for _ in range(6000):
+        lateness.append(p.wait())
+        clock.t += 3e-4  # work of the tick
+    assert p.margin == pytest.approx(210e-6, abs=10e-6)
+    late = np.array(lateness[3000:])  # settled
+    assert late.min() >= 0.0
+    # a reading advances the clock by 1 us: "on time" is within a few readings
+    assert np.mean(late > 5e-6) == pytest.approx(0.2, abs=0.04)
+    assert late.max() < 45e-6
+    assert p.stats.late == 0 and p.stats.missed == 0
+
+    precise = OvershootingClock([0.0])
+    q = Pacer(0.001, clock=precise, sleep=precise.sleep)
+    for _ in range(4000):
+        q.wait()
+        precise.t += 3e-4
+    assert q.margin == pytest.approx(2e-5)  # the least margin
+
+
+def test_a_fixed_margin_stays_as_given():
+    clock = OvershootingClock([1e-4])
+    p = Pacer(0.001, clock=clock, sleep=clock.sleep, margin=3e-4)
+    for _ in range(100):
+        p.wait()
+    assert not p.adaptive and p.margin == 3e-4
+
+
 # ---------------------------------------------------------------- settings
 def test_every_parameter_has_a_description_and_a_config_default():
     assert {p.name for p in PARAMETERS} >= {
