@@ -264,6 +264,17 @@ def test_a_short_run_never_imports_numba(tmp_path):
         assert plain == compiled, name
 
 
+def test_with_numbas_jit_disabled_a_run_is_plain_python(tmp_path):
+    """``NUMBA_DISABLE_JIT=1`` (numba's switch for debugging kernels in Python): the compiled
+    functions are the plain ones once numba is imported, the tiers load nothing, and the run
+    writes what the compiled run writes."""
+    plain, compiled = tmp_path / "plain", tmp_path / "compiled"
+    args = ["run", "four_bar", "--duration", "0.05", "--out"]
+    _vjm([*args, str(plain)], None, NUMBA_DISABLE_JIT="1")
+    _vjm([*args, str(compiled)], None)
+    assert (plain / "trajectory.csv").read_bytes() == (compiled / "trajectory.csv").read_bytes()
+
+
 def test_compile_server_reports_a_failure():
     """A request the child cannot compile is answered with the reason, not left waiting."""
     server = tiers.CompileServer()

@@ -328,7 +328,9 @@ class Tiered:
             start = time.perf_counter()
             try:
                 self._resolve()
-                if not enabled() or load_cached(self.compiled, args):
+                # a plain function where numba compiles nothing (NUMBA_DISABLE_JIT)
+                if (not enabled() or not jit.is_compiled(self.compiled)
+                        or load_cached(self.compiled, args)):
                     self._ready = True
                     return
                 self._request = server().request(self.module, self.name, args)
