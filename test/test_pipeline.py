@@ -52,7 +52,6 @@ def test_block_equals_tick_by_tick(scene, settings):
         expected.append(one.sample())
     block = SampleBlock(sc.model, 50)
     got = []
-    many.blocks_compiled()  # one compiled call per block, none of it as plain Python first
     while many.ticks < ticks:  # blocks of 50, 50 and 20: the state carries across calls
         many.advance_block(block, min(50, ticks - many.ticks))
         got += [block.sample(i) for i in range(len(block))]

@@ -557,7 +557,8 @@ class Mechanism:
         while True:
             # as plain Python (tiers), a few ticks per call: the compiled code takes over as soon
             # as it is there; each call's first tick evaluates its start state itself
-            ready = getattr(advance, "ready", True)  # a compiled function has no tiers
+            # a compiled function has no tiers; with the tiers off the call loads it at once
+            ready = getattr(advance, "ready", True) or not tiers.enabled()
             part = rows - done if ready else min(PLAIN_PART_TICKS, rows - done)
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
@@ -582,7 +583,7 @@ scenes takes 0.2-0.5 ms as plain Python, the load 70-120 ms on a slow machine, a
 where it is the first compiled function a process needs (numba imported with it,
 :func:`vjm_ros.core.jit.activate`). ``vjm run`` makes 8-11 such calls besides its block pipeline
 (the scene's inertia check, its assembly, the mobility check, the first sample); ``vjm scenes``
-about 20."""
+41 for the eight built-in scenes."""
 
 
 PIPELINE_PLAIN_CALLS = 1
