@@ -12,11 +12,10 @@
 from __future__ import annotations
 
 import math
+import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import numpy as np
 
 from vjm_ros.realtime.pacing import PacingStats
 from vjm_ros.sim.simulator import Sample
@@ -40,7 +39,7 @@ class EnergyLedger:
         """Start a new balance at the next sample."""
         self._started = False
         self._t = 0.0
-        self._qd: np.ndarray | None = None
+        self._qd: list[float] = []
         self._dissipation = 0.0
         self._e0 = 0.0
         self.work = 0.0
@@ -56,18 +55,21 @@ class EnergyLedger:
         float
             The current residual, J.
         """
+        # Python floats: numpy's per-call overhead on arrays of a few entries is several times
+        # the arithmetic (the node calls this every tick)
         total = float(sample.energy[3])
         if not self._started:
             self._started = True
             self._e0 = total
         else:
-            rate_start = float(sample.effort @ self._qd) - self._dissipation
+            rate_start = sum(map(operator.mul, sample.effort.tolist(), self._qd))
+            rate_start -= self._dissipation
             rate_end = sample.power_in - sample.dissipation
             self.work += 0.5 * (rate_start + rate_end) * (sample.t - self._t)
             self.residual = total - self._e0 - self.work
             self.max_residual = max(self.max_residual, abs(self.residual))
         self._t = sample.t
-        self._qd = sample.qd.copy()
+        self._qd = sample.qd.tolist()
         self._dissipation = sample.dissipation
         return self.residual
 
@@ -109,7 +111,7 @@ class Monitor:
     def observe(self, sample: Sample) -> None:
         """Account for one sample."""
         self.ledger.update(sample)
-        err = sample.max_closure_error
+        err = max(sample.closure_error.tolist(), default=0.0)  # a list: see EnergyLedger.update
         w = self._window
         w.max_closure_error = max(w.max_closure_error, err)
         self.max_closure_error = max(self.max_closure_error, err)

@@ -97,7 +97,14 @@ from vjm_ros.realtime.parameters import (
     ticks_between,
 )
 from vjm_ros.ros import conversions as conv
-from vjm_ros.ros.runtime import PolledGroup, Spinner, StopOnSignals, raise_priority, take_all
+from vjm_ros.ros.runtime import (
+    PolledGroup,
+    Spinner,
+    StopOnSignals,
+    raise_priority,
+    raw_publish,
+    take_all,
+)
 from vjm_ros.ros.wire import MarkerWire, TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
@@ -277,6 +284,12 @@ class SimNode(Node):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._scene_pub = self.create_publisher(String, "~/scene_description", latched)
+        # the tick loop's per-tick messages are serialized bytes (TickWire, MarkerWire)
+        self._send_joints = raw_publish(self._joint_pub)
+        self._send_forces = raw_publish(self._forces_pub)
+        self._send_energy = raw_publish(self._energy_pub)
+        self._send_clock = raw_publish(self._clock_pub)
+        self._send_markers = raw_publish(self._markers_pub)
 
     def _commands_for(self, sim: Simulator) -> CommandBuffer:
         model = sim.model
@@ -308,7 +321,7 @@ class SimNode(Node):
             if name not in self._wrench_pubs:
                 self._wrench_pubs[name] = self.create_publisher(
                     WrenchStamped, conv.wrench_topic(name), 10)
-        self._wrench_list = [self._wrench_pubs[n] for n in self._closure_names]
+        self._send_wrenches = [raw_publish(self._wrench_pubs[n]) for n in self._closure_names]
         self._wire = TickWire(self._joint_names, self._closure_names)
         self._marker_wire = MarkerWire()
         self._trace = conv.TipTrace(len(model.chains))
@@ -328,25 +341,25 @@ class SimNode(Node):
 
     def clock(self, t: float) -> None:
         """Publish ``/clock``."""
-        self._clock_pub.publish(self._wire.clock_at(t))
+        self._send_clock(self._wire.clock_at(t))
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
-        self._joint_pub.publish(self._wire.joint_state(t, q, qd, effort))
+        self._send_joints(self._wire.joint_state(t, q, qd, effort))
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
         forces = sample.closure_force
         wire = self._wire
-        self._forces_pub.publish(wire.constraint_forces(forces))
-        for i, pub in enumerate(self._wrench_list):
-            pub.publish(wire.wrench(i, forces[i], t))
-        self._energy_pub.publish(wire.energy_values(sample.energy))
+        self._send_forces(wire.constraint_forces(forces))
+        for i, send in enumerate(self._send_wrenches):
+            send(wire.wrench(i, forces[i], t))
+        self._send_energy(wire.energy_values(sample.energy))
 
     def markers(self, sample: Sample, t: float) -> None:
         """Publish ``~/markers`` stamped ``t`` (s); the tip trace gains the sample's tips."""
         self._trace.add(sample)
-        self._markers_pub.publish(self._marker_wire.markers(sample, t, self._trace.strips()))
+        self._send_markers(self._marker_wire.markers(sample, t, self._trace.strips()))
 
     def diagnostics(self, report: dict, paused: bool, level: int | None = None,
                     message: str | None = None) -> None:

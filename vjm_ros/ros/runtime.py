@@ -6,7 +6,8 @@
 * :class:`StopOnSignals` turns SIGINT and SIGTERM into a clean stop of the tick loop;
 * :func:`raise_priority` puts the tick loop's thread under SCHED_FIFO (Linux);
 * :class:`PolledGroup` hands subscriptions to the tick loop, which takes their messages itself
-  (:func:`take_all`) while it ticks freely.
+  (:func:`take_all`) while it ticks freely;
+* :func:`raw_publish` publishes serialized messages without rclpy's per-call guard.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import os
 import threading
 import traceback
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from rclpy.callback_groups import CallbackGroup
@@ -100,6 +102,25 @@ class PolledGroup(CallbackGroup):
 
     def ending_execution(self, entity) -> None:
         """Nothing to release."""
+
+
+def raw_publish(publisher) -> Callable[[bytes], None]:
+    """The publish of serialized messages of ``publisher`` (a ``rclpy.publisher.Publisher``).
+
+    ``Publisher.publish(data)`` enters the publisher's handle (so that it cannot be destroyed
+    meanwhile) and tests the message's type before rclpy's ``publish_raw``: 4 us of each
+    message's ~45 us on a slow machine, five to seven times per tick in the node. The returned
+    function is ``publish_raw`` itself; the caller publishes from one thread and destroys the
+    publisher only after its last call (the node: its tick loop, which rebuilds these functions
+    when a reset rebuilds a publisher). A publisher without it gets its ``publish``.
+
+    Returns
+    -------
+    callable
+        ``f(data: bytes)``: publish one CDR-serialized message of the publisher's type.
+    """
+    raw = getattr(getattr(publisher, "handle", None), "publish_raw", None)
+    return raw if callable(raw) else publisher.publish
 
 
 def take_all(subscriptions) -> list:

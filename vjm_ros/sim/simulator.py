@@ -182,6 +182,7 @@ class Simulator:
         self.q0, self.qd0 = model.initial_state()
         self.selection = model.actuator_matrix()
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
+        self._closure_rows = model.n_rows
         self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = closure_method(model, self.settings, self.scene_gains,
@@ -342,9 +343,9 @@ class Simulator:
             return
         arrays = (block.arrays if ticks == len(block.t)
                   else tuple(a[:ticks] for a in block.arrays))
-        project = (isinstance(self.method, ExactClosure) and self.method.projection
-                   and self.model.n_rows > 0)
-        limit = self.divergence_limit if (self.model.n_rows and self.divergence_limit) else np.inf
+        rows = self._closure_rows  # the model's, counted once (a property that sums)
+        project = isinstance(self.method, ExactClosure) and self.method.projection and rows > 0
+        limit = self.divergence_limit if (rows and self.divergence_limit) else np.inf
         start = self.ticks
         # compiled code raises no floating-point warnings: no np.errstate needed here
         done, code = self.mechanism.advance_observed(
@@ -353,10 +354,12 @@ class Simulator:
             self._point_local, arrays)
         # the states the ticks started from, for the diagnosis of a divergence (self.q is
         # replaced below, never changed in place)
-        self._history.add_block(start, self.dt, self.q, self.qd, block.q[:done], block.qd[:done])
-        if done == 1:
+        if done == 1:  # the node's tick
+            self._history.append(start * self.dt, self.q, self.qd)
             block.t[0] = (start + 1) * self.dt
         else:
+            self._history.add_block(start, self.dt, self.q, self.qd, block.q[:done],
+                                    block.qd[:done])
             block.t[:done] = (start + 1 + np.arange(done)) * self.dt
         block.rows = done
         if done:
