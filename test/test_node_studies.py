@@ -15,8 +15,12 @@ from vjm_ros.studies import node_cost
 
 
 def test_node_cost_measures_a_node_that_published_every_topic():
-    row = node_cost.measure("four_bar", seconds=0.5)
+    row = node_cost.measure("four_bar", seconds=0.5, repeats=2)
     assert row["ticks"] == 500
+    assert row["repeats"] == 2
+    for key in ("node_us", "bare_publish_us"):  # the median of two runs lies between them
+        lo, hi = row[key + "_range"]
+        assert lo <= row[key] <= hi, key
     # four_bar has two closures: /clock, joint_states, forces, energy and one wrench each
     assert row["topics_per_tick"] == 4 + len(load_scene("four_bar").model.closures)
     assert row["joint_states_received"] > 0

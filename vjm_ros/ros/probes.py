@@ -25,6 +25,20 @@ from vjm_ros.ros.node import NODE_NAME
 from vjm_ros.ros.runtime import Spinner
 
 
+def probe_executor(context: rclpy.Context):
+    """rclpy's ``EventsExecutor`` where it exists (Kilted on), else a ``SingleThreadedExecutor``.
+
+    A probe takes thousands of messages per second (every topic of a 1 kHz node). The
+    ``SingleThreadedExecutor`` rebuilds its wait set in Python for each one, which cost more
+    than a core on a slow machine; the events executor dispatches from C++.
+    """
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return SingleThreadedExecutor(context=context)
+    return EventsExecutor(context=context)
+
+
 class GraphProbe:
     """A node of its own that watches ``/joint_states`` and publishes effort commands.
 
@@ -63,7 +77,7 @@ class GraphProbe:
             self.node.create_subscription(
                 JointState, "/joint_states", on_state,
                 QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE))
-        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor = probe_executor(self.ctx)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor).start()
 

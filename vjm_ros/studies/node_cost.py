@@ -15,7 +15,8 @@ run and with one subscriber process on every topic the node publishes (this proc
    every observable, ``Simulator.advance_block`` of one tick) in this process, CPU time per
    tick.
 
-The ratio ``node / (physics + bare publish)`` is the node's overhead over its floor (issue
+The node and the bare publishing run ``--repeats`` times each, alternately; the ratio
+``node / (physics + bare publish)`` of their medians is the node's overhead over its floor (issue
 target: at most 1.3). CPU times on a shared 2-core machine vary from run to run: compare the
 figures of one run.
 """
@@ -88,31 +89,43 @@ def start_when_heard(sink, efforts: list[float], proc) -> None:
     sink.publish_efforts(efforts)
 
 
-def measure(scene: str, seconds: float) -> dict:
-    """The three costs of one scene (µs per tick) and the ratio."""
+def measure(scene: str, seconds: float, repeats: int = 3) -> dict:
+    """The three costs of one scene (µs per tick) and the ratio.
+
+    The node and the bare publishing run ``repeats`` times each, alternately (each with a fresh
+    subscriber); the ratio is that of their medians. Single runs of either varied by a third
+    from one to the next on a shared machine.
+    """
     from vjm_ros.ros.probes import TopicSink
 
     model = load_scene(scene).model
     efforts = [float(a.effort) for a in model.actuators]
     ticks = int(round(seconds * RATE))
-    with TopicSink("vjm_cost_sink", model.closure_names, commands=True) as sink:
-        node = run_node(node_command(scene, RATE, seconds, False,
-                                     ["marker_rate_hz:=10.0", "wait_for_command:=true"]),
-                        during=lambda proc: start_when_heard(sink, efforts, proc))
-        received_node = dict(sink.counts)
-        bare, topics = bare_publish_per_tick(scene, ticks)
+    node_ticks, bares, received = [], [], []
+    for _ in range(max(int(repeats), 1)):
+        with TopicSink("vjm_cost_sink", model.closure_names, commands=True) as sink:
+            node = run_node(node_command(scene, RATE, seconds, False,
+                                         ["marker_rate_hz:=10.0", "wait_for_command:=true"]),
+                            during=lambda proc, sink=sink: start_when_heard(sink, efforts, proc))
+            received.append(dict(sink.counts))
+            bare, topics = bare_publish_per_tick(scene, ticks)
+        node_ticks.append(node["ticking_cpu_time"] / max(node["ticks"], 1))
+        bares.append(bare)
     physics = physics_per_tick(scene)
-    node_tick = node["ticking_cpu_time"] / max(node["ticks"], 1)
+    node_tick, bare = float(np.median(node_ticks)), float(np.median(bares))
     return {
         "scene": scene,
         "ticks": node["ticks"],
+        "repeats": len(node_ticks),
         "topics_per_tick": topics,
         "node_us": 1e6 * node_tick,
+        "node_us_range": [1e6 * min(node_ticks), 1e6 * max(node_ticks)],
         "physics_us": 1e6 * physics,
         "bare_publish_us": 1e6 * bare,
+        "bare_publish_us_range": [1e6 * min(bares), 1e6 * max(bares)],
         "ratio": node_tick / (physics + bare),
-        "joint_states_received": received_node.get("/joint_states", 0),
-        "received": received_node,
+        "joint_states_received": min(r.get("/joint_states", 0) for r in received),
+        "received": received[-1],
         "load_1min": os.getloadavg()[0],
     }
 
@@ -125,15 +138,20 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=["four_bar", "five_bar", "three_chain"])
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated s per node run")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="alternate runs of the node and of the bare publishing (medians)")
     parser.add_argument("--json", action="store_true", help="rows as JSON on the last line")
     args = parser.parse_args(argv)
     rows = []
     for scene in args.scenes:
-        row = measure(scene, args.seconds)
+        row = measure(scene, args.seconds, args.repeats)
         rows.append(row)
-        print(f"{scene:>14}: node {row['node_us']:.0f} us CPU per tick; physics "
-              f"{row['physics_us']:.0f} us + bare publish of {row['topics_per_tick']} messages "
-              f"{row['bare_publish_us']:.0f} us; ratio {row['ratio']:.2f} (target <= 1.3); "
+        lo, hi = row["node_us_range"]
+        blo, bhi = row["bare_publish_us_range"]
+        print(f"{scene:>14}: node {row['node_us']:.0f} us CPU per tick ({lo:.0f}-{hi:.0f}); "
+              f"physics {row['physics_us']:.0f} us + bare publish of {row['topics_per_tick']} "
+              f"messages {row['bare_publish_us']:.0f} us ({blo:.0f}-{bhi:.0f}); ratio "
+              f"{row['ratio']:.2f} (target <= 1.3); medians of {row['repeats']} runs; at least "
               f"{row['joint_states_received']} joint states received of {row['ticks'] + 1}; "
               f"load {row['load_1min']:.2f}", flush=True)
     if args.json:
