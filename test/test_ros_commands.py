@@ -385,6 +385,24 @@ def test_the_margin_follows_the_sleeps_overshoot():
     assert q.margin == pytest.approx(2e-5)  # the least margin
 
 
+def test_the_margin_recovers_after_a_spell_of_long_oversleeps():
+    """Sleeps that overshoot by 1.5 ms for a while (a loaded machine) raise the margin, but never
+    beyond half the period: the loop still sleeps before each deadline, keeps learning, and the
+    margin comes back down once the sleeps are short again (above half the period the loop would
+    spin through every tick and, sleeping no more, never learn that it may)."""
+    long_spell, short = [1.5e-3] * 2000, [50e-6] * 30000
+    clock = OvershootingClock(long_spell + short)
+    p = Pacer(0.001, clock=clock, sleep=clock.sleep)
+    highest = 0.0
+    for _ in range(12000):
+        p.wait()
+        highest = max(highest, p.margin)
+        clock.t += 3e-4  # work of the tick
+    assert highest == pytest.approx(5e-4)  # half the period, not MARGIN_RANGE's 2 ms
+    assert clock.count > len(long_spell)  # it slept on after the spell...
+    assert p.margin == pytest.approx(60e-6, abs=5e-6)  # ...and follows the short sleeps again
+
+
 def test_a_fixed_margin_stays_as_given():
     clock = OvershootingClock([1e-4])
     p = Pacer(0.001, clock=clock, sleep=clock.sleep, margin=3e-4)

@@ -40,6 +40,12 @@ MARGIN_START = 2e-4
 """Margin before the first sleeps are seen, s."""
 MARGIN_RANGE = (2e-5, 2e-3)
 """Least and largest margin the estimate may take, s."""
+MARGIN_PERIOD_SHARE = 0.5
+"""Largest margin the estimate may take, as a share of the period: the loop must still sleep
+before each deadline to learn the overshoot. Above the time left after a tick's work it would
+spin through every tick and never sleep, so never learn that the overshoots had come down
+(without this bound, a spell of 1.5 ms oversleeps on a fake clock left a 1 kHz pacer spinning
+0.7 ms of every tick for good: test/test_ros_commands.py)."""
 MARGIN_GUARD = 1e-5
 """Added to the overshoot estimate, s."""
 OVERSHOOT_QUANTILE = 0.75
@@ -128,6 +134,7 @@ class Pacer:
         q = OVERSHOOT_QUANTILE
         self._overshoot += OVERSHOOT_STEP * (q if overshoot > self._overshoot else q - 1.0)
         lo, hi = MARGIN_RANGE
+        hi = max(min(hi, MARGIN_PERIOD_SHARE * self.period), lo)
         self._overshoot = min(max(self._overshoot, lo - MARGIN_GUARD), hi)
         self.margin = min(max(self._overshoot + MARGIN_GUARD, lo), hi)
 
