@@ -33,6 +33,7 @@ from rcl_interfaces.srv import SetParameters  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -390,6 +391,27 @@ def test_bad_commands_are_refused_with_throttled_reasons_and_limits_clamp(harnes
     assert h.node.loop.commands.efforts.tolist() == [100.0]
     wait_for(lambda: any("150 clamped to 100 (limit 100)" in s for s in log_lines(h)), 10.0,
              "the clamp warning")
+
+
+def test_bytes_that_hold_no_command_are_refused_naming_the_field(harness):
+    """The node reads its commands from their bytes: bytes that hold no such message (sent
+    raw by rclpy's publisher) are refused with the field and offset, and change nothing."""
+    h = harness(start_paused=True, command_timeout=0.0)
+    h.start()
+    h.efforts.publish(Float64MultiArray(data=[3.0]))
+    wait_for(lambda: h.node.loop.commands.accepted == 1, 10.0, "the valid command")
+    truncated = serialize_message(Float64MultiArray(data=[1.0]))[:22]  # half of the double
+    h.efforts.publish(truncated)
+    wait_for(lambda: h.node.loop.commands.rejected == 1, 10.0, "the truncated command")
+    h.named.publish(b"\x00\x07\x00\x00" + bytes(8))  # not plain CDR
+    wait_for(lambda: h.node.loop.commands.rejected == 2, 10.0, "the foreign bytes")
+    expected = ["~/effort_commands: command refused: std_msgs/Float64MultiArray: data needs 8 "
+                "bytes at byte 20, the message has 22",
+                "~/joint_commands: command refused: sensor_msgs/JointState: expected a plain CDR "
+                "encapsulation header"]
+    wait_for(lambda: all(any(w in s for s in log_lines(h)) for w in expected), 10.0,
+             "the warnings")
+    assert h.node.loop.commands.efforts.tolist() == [3.0]
 
 
 # ---------------------------------------------------------------- services

@@ -35,7 +35,9 @@ UNKNOWN_JOINT = "unknown_joint"
 NOT_ACTUATED = "not_actuated"
 DUPLICATE_JOINT = "duplicate_joint"
 NO_EFFORTS = "no_efforts"
-REJECTION_KINDS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, NOT_ACTUATED, DUPLICATE_JOINT, NO_EFFORTS)
+MALFORMED = "malformed"
+REJECTION_KINDS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, NOT_ACTUATED, DUPLICATE_JOINT, NO_EFFORTS,
+                   MALFORMED)
 """Classes of refused commands (keys of the throttled warnings)."""
 
 
@@ -212,6 +214,10 @@ class CommandBuffer:
         idx = [self._index[s] for s in names]
         v[idx] = e
         return self._accept(v, idx)
+
+    def refuse_malformed(self, reason: str) -> Verdict:
+        """Count a command whose bytes held no readable message (``reason`` says where)."""
+        return self._reject(MALFORMED, reason)
 
     def _reject(self, kind: str, reason: str) -> Verdict:
         with self._cv:

@@ -391,16 +391,6 @@ def _text(value) -> str:
 
 
 # ---------------------------------------------------------------- inputs
-def efforts_of(msg: Float64MultiArray) -> np.ndarray:
-    """Values of a ``Float64MultiArray`` (its layout is not used), shape (m,)."""
-    return np.asarray(msg.data, dtype=float)
-
-
-def named_efforts(msg: JointState) -> tuple[list[str], np.ndarray]:
-    """Names and efforts of a ``JointState`` command."""
-    return list(msg.name), np.asarray(msg.effort, dtype=float)
-
-
 def joint_arrays(msg: JointState, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities and efforts of ``msg`` in the order of ``names``.
 

@@ -97,6 +97,7 @@ from vjm_ros.realtime.parameters import (
     ticks_between,
 )
 from vjm_ros.ros import conversions as conv
+from vjm_ros.ros.command_wire import MalformedCommand, joint_state_efforts, multi_array_values
 from vjm_ros.ros.runtime import (
     PolledGroup,
     Spinner,
@@ -221,10 +222,12 @@ class SimNode(Node):
         self._publish_scene()
         polled = PolledGroup(lambda: self.loop.polls_inputs)
         self._polled = [
+            # taken as bytes, read by command_wire (a typed take cost 4x the raw one)
             (self.create_subscription(Float64MultiArray, "~/effort_commands", self._on_efforts,
-                                      10, callback_group=polled), self._on_efforts),
+                                      10, callback_group=polled, raw=True), self._on_efforts),
             (self.create_subscription(JointState, "~/joint_commands", self._on_joint_commands,
-                                      10, callback_group=polled), self._on_joint_commands),
+                                      10, callback_group=polled, raw=True),
+             self._on_joint_commands),
         ]
         self.loop.poll_inputs = self._poll_commands
         self.create_service(SetBool, "~/pause", self._on_pause)
@@ -386,12 +389,23 @@ class SimNode(Node):
         self.get_logger().warning(text + suffix)
 
     # ------------------------------------------------------------------ inputs (tick loop or executor thread)
-    def _on_efforts(self, msg: Float64MultiArray) -> None:
-        self._judge("~/effort_commands", self.loop.commands.submit_array(conv.efforts_of(msg)))
+    def _on_efforts(self, data: bytes) -> None:
+        """A serialized ``~/effort_commands`` message (``Float64MultiArray``)."""
+        commands = self.loop.commands
+        try:
+            verdict = commands.submit_array(multi_array_values(data))
+        except MalformedCommand as exc:
+            verdict = commands.refuse_malformed(str(exc))
+        self._judge("~/effort_commands", verdict)
 
-    def _on_joint_commands(self, msg: JointState) -> None:
-        names, efforts = conv.named_efforts(msg)
-        self._judge("~/joint_commands", self.loop.commands.submit_named(names, efforts))
+    def _on_joint_commands(self, data: bytes) -> None:
+        """A serialized ``~/joint_commands`` message (``JointState``)."""
+        commands = self.loop.commands
+        try:
+            verdict = commands.submit_named(*joint_state_efforts(data))
+        except MalformedCommand as exc:
+            verdict = commands.refuse_malformed(str(exc))
+        self._judge("~/joint_commands", verdict)
 
     def _poll_commands(self) -> None:
         """Run the command handlers on what arrived since the previous tick (loop thread)."""
