@@ -135,23 +135,10 @@ def multi_array_values(data: bytes) -> np.ndarray:
 
 
 def joint_state_efforts(data: bytes) -> tuple[list[str], np.ndarray]:
-    """``name`` and ``effort`` of a serialized ``sensor_msgs/JointState``.
-
-    Parameters
-    ----------
-    data : bytes
-        The CDR-serialized message.
-
-    Returns
-    -------
-    names : list of str
-    efforts : ndarray, shape (m,)
-        N m or N (any length: the command buffer judges it against the names).
-
-    Raises
-    ------
-    MalformedCommand
-    """
+    """``name`` and ``effort`` of a serialized ``sensor_msgs/JointState`` (``data``, the bytes
+    a ``raw=True`` subscription takes), as ``(names, efforts)``: a list of str and an array of
+    shape (m,), N m or N, of any length (the command buffer judges it against the names).
+    Raises :class:`MalformedCommand`."""
     r = _Reader(data, "sensor_msgs/JointState")
     r.skip(4, "header.stamp.sec")
     r.skip(4, "header.stamp.nanosec")
