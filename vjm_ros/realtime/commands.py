@@ -63,6 +63,10 @@ class Verdict:
     clamped: tuple[str, ...] = ()
 
 
+_ACCEPTED = Verdict(True)
+"""The verdict of every command accepted as it is (immutable, so shared)."""
+
+
 @dataclass(frozen=True)
 class Latched:
     """The efforts for one tick.
@@ -122,6 +126,7 @@ class CommandBuffer:
         self.limits = np.asarray(limits, dtype=float).reshape(-1)
         if self.limits.shape != (len(self.actuator_names),):
             raise ValueError("one limit per actuator is required")
+        self._limit_list = self.limits.tolist()
         self._index = {name: i for i, name in enumerate(self.actuator_names)}
         self._joints = set(self.joint_names)
         self.timeout = float(timeout)
@@ -150,13 +155,15 @@ class CommandBuffer:
         -------
         Verdict
         """
-        v = np.asarray(values, dtype=float).reshape(-1)
+        # Python floats: at 1 kHz this runs every tick, and numpy's per-call overhead on a few
+        # entries is several times the work
+        v = np.asarray(values, dtype=float).reshape(-1).tolist()
         n = len(self.actuator_names)
-        if v.size != n:
+        if len(v) != n:
             return self._reject(
                 WRONG_LENGTH,
                 f"expected {n} value{'s' if n != 1 else ''} (actuators in scene order: "
-                f"{_names(self.actuator_names)}), found {v.size}",
+                f"{_names(self.actuator_names)}), found {len(v)}",
             )
         bad = [i for i in range(n) if not math.isfinite(v[i])]
         if bad:
@@ -190,8 +197,8 @@ class CommandBuffer:
             return self._reject(
                 WRONG_LENGTH, f"'name' has {len(names)} entries but 'effort' has {e.size}"
             )
-        dup = sorted(s for s, count in Counter(names).items() if count > 1)
-        if dup:
+        if len(set(names)) != len(names):
+            dup = sorted(s for s, count in Counter(names).items() if count > 1)
             return self._reject(DUPLICATE_JOINT, f"joint named more than once: {_names(dup)}")
         unknown = [s for s in names if s not in self._joints]
         if unknown:
@@ -206,13 +213,15 @@ class CommandBuffer:
                 f"joint {_names(passive)} has no actuator (actuated joints: "
                 f"{_names(self.actuator_names)})",
             )
-        bad = [f"{s} = {x}" for s, x in zip(names, e, strict=True) if not math.isfinite(x)]
+        values = e.tolist()
+        bad = [f"{s} = {x}" for s, x in zip(names, values, strict=True) if not math.isfinite(x)]
         if bad:
             return self._reject(NON_FINITE, f"non-finite effort ({', '.join(bad)})")
         with self._cv:
-            v = self._efforts.copy() if self._active else np.zeros(len(self.actuator_names))
+            v = self._efforts.tolist() if self._active else [0.0] * len(self.actuator_names)
         idx = [self._index[s] for s in names]
-        v[idx] = e
+        for i, x in zip(idx, values, strict=True):
+            v[i] = x
         return self._accept(v, idx)
 
     def refuse_malformed(self, reason: str) -> Verdict:
@@ -224,23 +233,29 @@ class CommandBuffer:
             self.rejected += 1
         return Verdict(False, kind, reason)
 
-    def _accept(self, v: np.ndarray, touched) -> Verdict:
-        clipped = np.clip(v, -self.limits, self.limits)
-        clamped = tuple(
-            f"{self.actuator_names[i]}: {v[i]:.6g} clamped to {clipped[i]:.6g} "
-            f"(limit {self.limits[i]:.6g})"
-            for i in touched
-            if clipped[i] != v[i]
-        )
+    def _accept(self, v: list[float], touched) -> Verdict:
+        """Put the finite efforts ``v`` (one per actuator) in force, each within its limit."""
+        clipped = [min(max(x, -lim), lim) for x, lim in zip(v, self._limit_list, strict=True)]
+        if clipped == v:
+            clamped, verdict = (), _ACCEPTED
+        else:
+            clamped = tuple(
+                f"{self.actuator_names[i]}: {v[i]:.6g} clamped to {clipped[i]:.6g} "
+                f"(limit {self.limits[i]:.6g})"
+                for i in touched
+                if clipped[i] != v[i]
+            )
+            verdict = Verdict(True, clamped=clamped)
+        efforts = np.array(clipped, dtype=float)
         with self._cv:
-            self._efforts = clipped
+            self._efforts = efforts
             self._stamp = self._clock()
             self._active = True
             self._fresh = True
             self.accepted += 1
             self.clamped += len(clamped)
             self._cv.notify_all()
-        return Verdict(True, clamped=clamped)
+        return verdict
 
     # ------------------------------------------------------------------ consumer
     def latch(self) -> Latched:
