@@ -30,7 +30,10 @@ def probe_executor(context: rclpy.Context):
 
     A probe takes thousands of messages per second (every topic of a 1 kHz node). The
     ``SingleThreadedExecutor`` rebuilds its wait set in Python for each one, which cost more
-    than a core on a slow machine; the events executor dispatches from C++.
+    than a core on a slow machine; the events executor dispatches from C++. Either is spun by
+    :class:`~vjm_ros.ros.runtime.Spinner` with ``spin_once(timeout_sec=...)`` (idle, the probe then
+    takes 0.3 % of a core); the events executor's ``spin()`` is never used: it was seen to
+    busy-loop without running callbacks.
     """
     try:
         from rclpy.experimental import EventsExecutor
