@@ -32,8 +32,8 @@ def probe_executor(context: rclpy.Context):
     ``SingleThreadedExecutor`` rebuilds its wait set in Python for each one, which cost more
     than a core on a slow machine; the events executor dispatches from C++. Either is spun by
     :class:`~vjm_ros.ros.runtime.Spinner` with ``spin_once(timeout_sec=...)`` (idle, the probe then
-    takes 0.3 % of a core); the events executor's ``spin()`` is never used: it was seen to
-    busy-loop without running callbacks.
+    takes 0.3 % of a core), never by ``spin()``: the loop of ``spin_once`` calls is what lets
+    :meth:`~vjm_ros.ros.runtime.Spinner.stop` end it.
     """
     try:
         from rclpy.experimental import EventsExecutor
