@@ -32,12 +32,20 @@ def test_node_cost_measures_a_node_that_published_every_topic():
         assert math.isfinite(row[key]) and row[key] > 0, key
 
 
-def test_live_loop_measures_commands_that_reached_the_node():
-    """One second live with the controller in the loop: commands were sent, some showed in the
-    joint states (the lag is then measured, never assumed), and every per-tick topic arrived."""
+def test_live_loop_measures_commands_that_reached_the_node(capfd):
+    """One second live with the controller in the loop, through the study's command line:
+    commands were sent, some showed in the joint states (the lag is then measured, never
+    assumed), every per-tick topic arrived, and the machine's pacing floor ran before it."""
+    import json
+
     from vjm_ros.studies import live_loop
 
-    row = live_loop.measure("five_bar", seconds=1.0, extra=[])
+    assert live_loop.main(["--scenes", "five_bar", "--seconds", "1", "--floor-seconds", "0.2",
+                           "--json"]) == 0
+    out = capfd.readouterr().out
+    assert "pacing floor" in out
+    (row,) = json.loads(out.strip().splitlines()[-1])
+    assert 0 <= row["floor_missed_share"] <= 1 and row["floor_max_lateness_ms"] >= 0
     assert row["ticks"] == 1000
     assert row["commands"] > 0 and 0 < row["applied_share"] <= 1
     assert math.isfinite(row["lag_median_ticks"]) and row["lag_median_ticks"] >= 1

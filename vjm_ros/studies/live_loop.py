@@ -14,7 +14,11 @@ applied effort equals it tells when the command took effect:
 * **commands applied**: share of the commands sent that ever showed in a joint state (target:
   at least 95 %; a command overtaken by the next one before a tick latches it never shows).
 
-The figures depend on the machine's load: compare within one run.
+Right before each scene, the study runs the node's pacer with an empty tick for as long
+(:mod:`vjm_ros.studies.pacing_floor`, ``--floor-seconds``; 0 skips it): the ticks *it* misses
+are the machine's, and no node can miss fewer on that machine at that time. Each row carries
+that floor (``floor_missed_share``, ``floor_max_lateness_ms``). The figures depend on the
+machine's load: compare within one run.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import threading
 import numpy as np
 
 from vjm_ros.scene.loader import builtin_scenes, load_scene
+from vjm_ros.studies import pacing_floor
 from vjm_ros.studies.latency import node_command, run_node, take_applied
 
 RATE = 1000.0
@@ -118,11 +123,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="realtime run, s (10)")
     parser.add_argument("-p", "--param", action="append", default=[],
                         help="extra node parameter name:=value (repeatable)")
+    parser.add_argument("--floor-seconds", type=float, default=None,
+                        help="the pacer with an empty tick before each scene, s (as --seconds; "
+                             "0: not run)")
     parser.add_argument("--json", action="store_true", help="rows as JSON on the last line")
     args = parser.parse_args(argv)
+    floor_seconds = args.seconds if args.floor_seconds is None else args.floor_seconds
     rows = []
     for scene in args.scenes:
+        floor = pacing_floor.measure(floor_seconds, RATE) if floor_seconds > 0 else None
         row = measure(scene, args.seconds, args.param)
+        if floor is not None:
+            row["floor_missed_share"] = floor["missed_share"]
+            row["floor_max_lateness_ms"] = floor["max_lateness_ms"]
+            print(f"{'':>14}  {pacing_floor.describe(floor)}", flush=True)
         rows.append(row)
         print(f"{scene:>14}: missed {row['missed_ticks']} of {row['ticks']} ticks "
               f"({100 * row['missed_share']:.2f} %, target <= 0.1 %); command lag median "
