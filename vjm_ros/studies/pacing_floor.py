@@ -7,8 +7,9 @@ Whatever such a loop misses, the node misses too, whatever its tick costs: a tic
 period or more after its deadline is missed (:mod:`vjm_ros.realtime.pacing`), and every tick after
 a stall of the process counts until the loop has caught up. On a machine that holds the process
 off its core for milliseconds at a time (a virtual machine on a busy host, for one), these stalls
-alone can exceed the live target of :mod:`vjm_ros.studies.live_loop` (at most 0.1 % of the ticks missed); that study
-runs this loop before its scenes so that its figures can be read against the machine's.
+alone can exceed the live target of :mod:`vjm_ros.studies.live_loop` (at most 0.1 % of the
+ticks missed); that study runs this loop before each of its scenes so that its figures can be
+read against the machine's.
 """
 
 from __future__ import annotations
