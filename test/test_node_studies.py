@@ -32,14 +32,18 @@ def test_node_cost_measures_a_node_that_published_every_topic():
         assert math.isfinite(row[key]) and row[key] > 0, key
 
 
-def test_live_loop_measures_commands_that_reached_the_node(capfd):
+def test_live_loop_measures_commands_that_reached_the_node(capfd, monkeypatch):
     """One second live with the controller in the loop, through the study's command line:
     commands were sent, some showed in the joint states (the lag is then measured, never
     assumed), every per-tick topic arrived, and the machine's pacing floor ran before it."""
     import json
 
+    from vjm_ros.core import tiers
     from vjm_ros.studies import live_loop
 
+    # the study sets VJM_TIERED=0 for itself and its node: monkeypatch puts back what the
+    # tests after this one had
+    monkeypatch.delenv(tiers.ENVIRONMENT, raising=False)
     assert live_loop.main(["--scenes", "five_bar", "--seconds", "1", "--floor-seconds", "0.2",
                            "--json"]) == 0
     out = capfd.readouterr().out
