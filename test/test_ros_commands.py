@@ -534,6 +534,19 @@ def test_monitor_reports_windows_and_totals():
     assert assess(rep)[0] == 0 and math.isnan(rep["sigma_min"])
 
 
+def test_monitor_window_spans_a_reset_in_published_time():
+    """The published time goes on across a reset (one tick later), so a report window that
+    holds a reset counts the simulated time of both episodes: 2 s of it in 4 wall s here."""
+    clock = FakeClock()
+    mon = Monitor(clock)
+    clock.t = 1.0
+    mon.report(1.0, PacingStats())  # the window now starts at published time 1.0 s
+    clock.t = 3.0
+    mon.reset()  # the episode ended at 2.0 s; the next one starts at 2.001 s
+    clock.t = 5.0
+    assert mon.report(3.0, PacingStats())["realtime_factor"] == pytest.approx(0.5)
+
+
 # ---------------------------------------------------------------- the tick loop
 class Collect:
     """Outputs that record what the loop produces (and may act on it)."""
@@ -589,6 +602,32 @@ def test_duration_stops_after_exactly_that_many_ticks():
     np.testing.assert_allclose(out.times, np.arange(51) * 0.002, atol=1e-12)
     assert out.clocks == out.times
     np.testing.assert_allclose(out.forces, np.arange(0, 51, 5) * 0.002, atol=1e-12)
+
+
+def test_duration_counts_published_time_since_start_across_resets():
+    """``duration`` is simulated time since the start, the time ``/clock`` publishes, which a
+    reset does not turn back: 30 ticks, a reset (its state published one tick later, 31 ms),
+    then ticks up to 100 ms, and no further."""
+    out = Collect()
+    loop = make_loop(out, duration=0.1)
+    loop.pause(True)
+    result = []
+    thread = threading.Thread(target=lambda: result.append(loop.run()))
+    thread.start()
+    try:
+        for _ in range(30):
+            assert loop.step(timeout=10.0) is not None  # 10 s: a hang guard
+        assert loop.reset(timeout=10.0)
+        loop.pause(False)
+        thread.join(30.0)
+    finally:
+        loop.stop()
+        thread.join(10.0)
+    assert result == [DURATION]
+    assert out.clocks[-1] == pytest.approx(0.1, abs=1e-12)
+    assert all(b > a for a, b in zip(out.clocks, out.clocks[1:], strict=False))
+    assert out.clocks[31] == pytest.approx(0.031, abs=1e-12)  # the reset state
+    assert loop.ticks == 99 and loop.time == pytest.approx(0.1, abs=1e-12)
 
 
 def test_command_received_during_tick_k_applies_from_tick_k_plus_1():

@@ -122,7 +122,8 @@ class LoopOptions:
     realtime : bool
         Pace to the wall clock.
     duration : float
-        Stop after this much simulated time, s; 0: never.
+        Stop once the published simulated time (:attr:`TickLoop.time`, counted from the start
+        and never turned back by a reset) reaches this, s; 0: never.
     publish_every : int
         Ticks between two joint-state outputs.
     forces_every : int
@@ -200,6 +201,8 @@ class TickLoop:
         self.pacer = Pacer(simulator.dt, self.options.realtime, clock=clock, sleep=sleep)
         self.monitor = Monitor(clock)
         self.lockstep_timeouts = 0
+        self.ticks = 0
+        """Ticks run since the start, across resets (the simulator's own count restarts)."""
         self._cv = threading.Condition()
         self._stop = False
         self._paused = paused
@@ -402,8 +405,11 @@ class TickLoop:
             self.ticking_since = (self._clock(), time.process_time())
 
     def _duration_reached(self) -> bool:
+        """Whether the published time (:attr:`time`, which a reset does not turn back) has
+        reached ``duration``: the simulated time since the start, not the episode's. 1 ns of
+        slack absorbs the rounding of the tick times to whole nanoseconds."""
         d = self.options.duration
-        return d > 0 and self.sim.ticks >= math.ceil(d * self.sim.settings.rate - 1e-9)
+        return d > 0 and self.timebase.to_ns(self.sim.t) >= round(d * 1e9) - 1
 
     def _await_tick(self) -> bool:
         """Wait until the next tick may run; False when a request or a stop came first."""
@@ -462,6 +468,7 @@ class TickLoop:
         )
 
     def _tick(self) -> None:
+        self.ticks += 1
         if self._polling():
             self.poll_inputs()
         latched = self.commands.latch()
@@ -600,7 +607,7 @@ class TickLoop:
         self.logs.note_reset(t_before)
         self.timebase.tick_ns = int(round(self.sim.dt * 1e9))
         start = self.timebase.reset(t_before) * 1e-9
-        self.monitor.reset(start)
+        self.monitor.reset()
         self._next_sigma = 0.0
         self.pacer.restart()
         self.outputs.notice(

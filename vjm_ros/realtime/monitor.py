@@ -100,11 +100,12 @@ class Monitor:
         self.max_closure_error = 0.0
         self._window = Window(clock(), 0.0)
 
-    def reset(self, sim_time: float = 0.0) -> None:
-        """Forget the run-long figures (after a simulator reset)."""
+    def reset(self) -> None:
+        """Forget the episode's figures (after a simulator reset). The report window keeps its
+        start: the published time goes on across a reset, so its realtime factor counts the
+        simulated time of both episodes."""
         self.ledger.reset()
         self.max_closure_error = 0.0
-        self._window.sim_start = sim_time
         self._window.max_closure_error = 0.0
         self._window.sigma_min = math.inf
 

@@ -87,7 +87,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Pace ticks to the wall clock (late and missed ticks are counted); false: run "
               "as fast as possible."),
     ParamSpec("duration", 0.0,
-              "Simulated seconds after which the node stops with exit code 0; 0: run until "
+              "Simulated seconds after which the node stops with exit code 0, counted from "
+              "the start as /clock counts them (a ~/reset does not restart it); 0: run until "
               "stopped.", 0.0, 1e9),
     ParamSpec("mcap", "",
               "Path of an MCAP log (ROS 2 profile) written while running; empty: none.",

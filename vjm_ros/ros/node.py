@@ -486,8 +486,10 @@ class SimNode(Node):
     def summary(self, reason: str, wall: float, cpu: float) -> dict:
         """Figures of the whole run (logged on exit); ``wall`` and ``cpu`` (process time) in s.
 
-        ``ticking_wall_time`` and ``ticking_cpu_time`` (s) count from the first tick on (after a
-        ``wait_for_command`` hold), the figures a per-tick cost is taken from.
+        ``sim_time`` is the simulated time published last (``/clock``: since the start, across
+        resets), ``ticks`` the ticks run since the start and ``realtime_factor`` their ratio to
+        ``wall``. ``ticking_wall_time`` and ``ticking_cpu_time`` (s) count from the first tick
+        on (after a ``wait_for_command`` hold), the figures a per-tick cost is taken from.
         """
         loop = self.loop
         stats = loop.pacer.stats
@@ -497,13 +499,13 @@ class SimNode(Node):
         return {
             "scene": self.scene.name,
             "reason": reason,
-            "sim_time": loop.sim.t,
-            "ticks": loop.sim.ticks,
+            "sim_time": loop.time,
+            "ticks": loop.ticks,
             "wall_time": wall,
             "cpu_time": cpu,
             "ticking_wall_time": ticking[0],
             "ticking_cpu_time": ticking[1],
-            "realtime_factor": loop.sim.t / wall if wall > 0 else None,
+            "realtime_factor": loop.time / wall if wall > 0 else None,
             "realtime": loop.options.realtime,
             "lockstep": loop.options.lockstep,
             "late_ticks": stats.late,
