@@ -119,8 +119,12 @@ def test_mcap_reader_validates_crcs_indexes_and_time_order(run):
         assert all(b >= a for a, b in zip(times, times[1:], strict=False))
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert {"run_settings", "package_versions", "rosbag2"} <= set(meta)
-    bag_info = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])["rosbag2_bagfile_information"]
+    bag_info = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])
     assert bag_info["message_count"] == summary.statistics.message_count
+    # rosbag2's MCAP plugin stores the metadata node itself, without the file's top-level key
+    # (its reader decodes the record's YAML as the metadata): the same node as metadata.yaml's.
+    in_file = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert bag_info == in_file and bag_info["version"] == 9
 
 
 def test_channel_metadata_parses_as_rosbag2_qos_and_type_hashes(run):
@@ -160,5 +164,5 @@ def test_a_truncated_log_recovered_reads_in_rosbags(run, tmp_path):
     assert sum(counts.values()) == saved
     with open(fixed, "rb") as f:
         meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
-    info = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])["rosbag2_bagfile_information"]
+    info = yaml.safe_load(meta["rosbag2"]["serialized_metadata"])
     assert info["message_count"] == sum(counts.values())

@@ -14,7 +14,7 @@ and a ``reset`` string is logged on ``/<node>/events`` at that time.
 What rosbag2 writes, this writes too (:mod:`vjm_ros.logs.rosbag2`): the ``ros2`` profile,
 ``ros2msg`` schemas named by their full type, ``cdr`` channels with the metadata
 ``offered_qos_profiles`` and ``topic_type_hash``, chunk and message indexes, a Statistics record,
-and a ``rosbag2`` metadata record holding the bag's ``metadata.yaml``; :meth:`McapRecorder.
+and a ``rosbag2`` metadata record holding the bag's metadata (version 9); :meth:`McapRecorder.
 bag_metadata` gives that document for a bag directory (``vjm run --bag``). rosbags, the ``mcap``
 reader, rerun and Foxglove read every message, in time order.
 
@@ -80,7 +80,8 @@ INDEXES = IndexType.ALL
 Readers that read in time order or by topic (rosbags, rosbag2, Foxglove) need the message
 indexes."""
 BAG_METADATA = "rosbag2"
-"""Name of the metadata record holding the bag's ``metadata.yaml`` (key ``serialized_metadata``)."""
+"""Name of the metadata record holding the bag's metadata (key ``serialized_metadata``: the node
+of ``metadata.yaml`` without its top-level key, :func:`~vjm_ros.logs.rosbag2.serialized_metadata`)."""
 
 
 def _metadata_values(data: dict) -> dict[str, str]:
@@ -377,7 +378,7 @@ class McapRecorder(Recorder):
         try:
             self._writer.add_metadata(
                 BAG_METADATA,
-                {"serialized_metadata": rosbag2.metadata_yaml(self.bag_metadata())},
+                {"serialized_metadata": rosbag2.serialized_metadata(self.bag_metadata())},
             )
             self._writer.finish()
             self.flushed_count = self.message_count

@@ -431,6 +431,7 @@ def recover(in_path: str | Path, out_path: str | Path, damage: list[str] | None 
             elif isinstance(r, DataEnd):
                 break
         document = bag.metadata(Path(out_path).name)
-        writer.add_metadata(BAG_METADATA, {"serialized_metadata": rosbag2.metadata_yaml(document)})
+        writer.add_metadata(BAG_METADATA,
+                            {"serialized_metadata": rosbag2.serialized_metadata(document)})
         writer.finish()
     return count

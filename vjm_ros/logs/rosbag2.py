@@ -1,17 +1,33 @@
 """What rosbag2 records beside the messages: offered QoS, type hashes, the bag's metadata.
 
-rosbag2's MCAP storage plugin (``rosbag2_storage_mcap``) writes, and its readers and rosbags
-(a third-party bag library) use:
+The layout is rosbag2's metadata version 9, which rosbag2 writes from Jazzy (0.26) through Kilted
+(0.32, the distro targeted here): the encoders of ``rosbag2_storage``'s ``yaml.hpp``
+(``convert<BagMetadata>``, ``convert<TopicMetadata>``, ``convert<FileInformation>``), ``qos.cpp``
+(``convert<rclcpp::QoS>``) and ``bag_metadata.hpp`` (``version = 9``) on rosbag2's ``jazzy``
+branch, unchanged in the Kilted releases. Field by field:
 
-* per channel, the metadata ``offered_qos_profiles`` (a YAML list with one QoS profile per
-  publisher; each profile has the nine keys history, depth, reliability, durability, deadline,
-  lifespan, liveliness, liveliness_lease_duration, avoid_ros_namespace_conventions) and, from
-  Iron on, ``topic_type_hash`` (``RIHS01_...``). The enums are written as integers, which every
-  distro's reader accepts (Jazzy and later also accept names); a malformed profile makes rosbags
-  refuse the whole file;
-* a metadata record ``rosbag2`` whose ``serialized_metadata`` is the bag's ``metadata.yaml``
-  (``rosbag2_bagfile_information``: topics with message counts, start, duration, files);
-* in a bag directory, the same document as ``metadata.yaml`` beside the ``.mcap`` file.
+* ``metadata.yaml``: ``rosbag2_bagfile_information`` with version, storage_identifier, duration,
+  starting_time, message_count, topics_with_message_count (per topic: name, type,
+  serialization_format, offered_qos_profiles as a YAML sequence of profiles with the enums by
+  their rmw names, type_description_hash; and the message count), compression_format,
+  compression_mode, relative_file_paths, files (per file: path, starting_time, duration,
+  message_count), custom_data (empty: null, as yaml-cpp writes an empty map) and ros_distro;
+* in the MCAP file (``rosbag2_storage_mcap``): a metadata record ``rosbag2`` whose
+  ``serialized_metadata`` is the same node without the ``rosbag2_bagfile_information`` key, and
+  per channel the metadata ``offered_qos_profiles`` (a YAML list of profiles as text) and
+  ``topic_type_hash`` (``RIHS01_...``).
+
+Each profile has the nine keys history, depth, reliability, durability, deadline, lifespan,
+liveliness, liveliness_lease_duration, avoid_ros_namespace_conventions. What other distros read:
+
+* Jazzy and Kilted read all of it. Their QoS decoder tells the two enum forms apart per profile
+  (integers, as version 8 and earlier wrote them, or names), in the file and in the channels;
+* Humble's rosbag2 (metadata version 5) reads ``offered_qos_profiles`` only as a string of
+  integer enums: it cannot parse a version 9 ``metadata.yaml`` (nor any Jazzy or Kilted one), and
+  it ignores the ``rosbag2`` record. Its MCAP plugin takes the profiles from the channels, so
+  those keep integer enums (which Jazzy and Kilted accept too): on Humble, play the ``.mcap``
+  file itself rather than the bag directory;
+* rosbags (a third-party bag library) reads versions up to 9, both enum forms.
 
 The profiles recorded are the ones the node offers: reliable, volatile, keep-last 10 (the event
 topic keeps 100, the scene description is transient-local, depth 1).
@@ -19,6 +35,7 @@ topic keeps 100, the scene description is transient-local, depth 1).
 
 from __future__ import annotations
 
+import copy
 import functools
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,9 +45,12 @@ import yaml
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 """libyaml's safe emitter where PyYAML was built with it, else the pure-Python one."""
 
-BAG_METADATA_VERSION = 8
-"""``metadata.yaml`` version written: the last whose QoS profiles are integers (Iron and Jazzy
-write 8; Kilted reads it), with per-topic type hashes."""
+BAG_METADATA_VERSION = 9
+"""``metadata.yaml`` version written: what rosbag2 writes from Jazzy through Kilted."""
+ROS_DISTRO = "kilted"
+"""``ros_distro`` of the metadata (rosbag2 writes the ``ROS_DISTRO`` it records under)."""
+BAG_KEY = "rosbag2_bagfile_information"
+"""Top-level key of ``metadata.yaml`` (absent from the MCAP record's ``serialized_metadata``)."""
 
 # rmw enums, as integers (rmw/types.h)
 HISTORY_KEEP_LAST = 1
@@ -38,6 +58,19 @@ RELIABILITY_RELIABLE = 1
 DURABILITY_TRANSIENT_LOCAL = 1
 DURABILITY_VOLATILE = 2
 LIVELINESS_AUTOMATIC = 1
+
+POLICY_NAMES = {
+    "history": ("system_default", "keep_last", "keep_all", "unknown"),
+    "reliability": ("system_default", "reliable", "best_effort", "unknown", "best_available"),
+    "durability": ("system_default", "transient_local", "volatile", "unknown", "best_available"),
+    "liveliness": ("system_default", "automatic", "unknown", "manual_by_topic", "unknown",
+                   "best_available"),
+}
+"""Name of each rmw enum value (``rmw_qos_*_policy_to_str``; the unknown value, which rmw does
+not name, and the withdrawn ``manual_by_node``, liveliness 2, are written ``unknown``)."""
+QOS_KEYS = ("history", "depth", "reliability", "durability", "deadline", "lifespan", "liveliness",
+            "liveliness_lease_duration", "avoid_ros_namespace_conventions")
+"""The keys of a profile, in the order rosbag2 writes them."""
 
 
 @dataclass(frozen=True)
@@ -76,8 +109,49 @@ EVENTS_QOS = OfferedQos(depth=100)
 LATCHED_QOS = OfferedQos(depth=1, durability=DURABILITY_TRANSIENT_LOCAL)
 
 
+def policy_name(key: str, value: int | str) -> str:
+    """The name metadata version 9 writes for the value of the QoS policy ``key``.
+
+    Parameters
+    ----------
+    key : str
+        ``history``, ``reliability``, ``durability`` or ``liveliness``.
+    value : int or str
+        The rmw enum value (a name is returned as it is).
+    """
+    if isinstance(value, str):
+        return value
+    names = POLICY_NAMES[key]
+    return names[value] if 0 <= value < len(names) else "unknown"
+
+
+def qos_profiles(text: str, topic: str = "") -> list[dict]:
+    """A channel's ``offered_qos_profiles`` text as ``metadata.yaml`` holds it (version 9): a list
+    of profiles, enums by name, keys in rosbag2's order.
+
+    Raises
+    ------
+    ValueError
+        When ``text`` is not a YAML list of mappings (``topic`` names it in the message).
+    """
+    return copy.deepcopy(_qos_profiles(text, topic))
+
+
+@functools.cache
+def _qos_profiles(text: str, topic: str) -> list[dict]:
+    profiles = yaml.safe_load(text) if text else []
+    if not isinstance(profiles, list) or not all(isinstance(p, dict) for p in profiles):
+        raise ValueError(f"offered_qos_profiles of {topic or 'a channel'}: expected a YAML list "
+                         f"of QoS profiles, found {text[:80]!r}")
+    return [
+        {k: policy_name(k, p[k]) if k in POLICY_NAMES else p[k] for k in QOS_KEYS if k in p}
+        for p in profiles
+    ]
+
+
 def qos_yaml(profiles: list[OfferedQos]) -> str:
-    """The ``offered_qos_profiles`` text of a channel: a YAML list of profiles."""
+    """The ``offered_qos_profiles`` text of a channel: a YAML list of profiles (integer enums,
+    which Humble's player needs and every later distro reads)."""
     return _qos_yaml(tuple(profiles))
 
 
@@ -97,7 +171,7 @@ class TopicRecord:
     name, type_name : str
         Topic and full ROS 2 type name.
     qos : str
-        ``offered_qos_profiles`` text.
+        ``offered_qos_profiles`` text of the channel (:func:`qos_yaml`).
     type_hash : str
         ``RIHS01_...``.
     count : int
@@ -134,7 +208,7 @@ class BagInfo:
         self.end_ns = last_ns if self.end_ns is None else max(self.end_ns, last_ns)
 
     def metadata(self, file_name: str) -> dict:
-        """The ``rosbag2_bagfile_information`` document for a bag of one file.
+        """The ``metadata.yaml`` document (version 9) for a bag of one file.
 
         Parameters
         ----------
@@ -145,7 +219,7 @@ class BagInfo:
         duration = max(0, (self.end_ns or start) - start)
         count = sum(t.count for t in self.topics)
         return {
-            "rosbag2_bagfile_information": {
+            BAG_KEY: {
                 "version": BAG_METADATA_VERSION,
                 "storage_identifier": "mcap",
                 "duration": {"nanoseconds": duration},
@@ -157,7 +231,7 @@ class BagInfo:
                             "name": t.name,
                             "type": t.type_name,
                             "serialization_format": "cdr",
-                            "offered_qos_profiles": t.qos,
+                            "offered_qos_profiles": qos_profiles(t.qos, t.name),
                             "type_description_hash": t.type_hash,
                         },
                         "message_count": t.count,
@@ -175,19 +249,25 @@ class BagInfo:
                         "message_count": count,
                     }
                 ],
-                "custom_data": {},
-                "ros_distro": "kilted",
+                "custom_data": None,
+                "ros_distro": ROS_DISTRO,
             }
         }
 
 
 def metadata_yaml(document: dict) -> str:
-    """``metadata.yaml`` text of a bag (also the ``rosbag2`` record's ``serialized_metadata``).
+    """``metadata.yaml`` text of a bag (:meth:`BagInfo.metadata`).
 
     Written by libyaml's emitter where PyYAML has it (2 ms -> 0.3 ms for a four-bar log, once
     per log as it closes): the same document as the pure-Python emitter, which folds long quoted
     strings at other places."""
     return yaml.dump(document, Dumper=_DUMPER, sort_keys=False)
+
+
+def serialized_metadata(document: dict) -> str:
+    """The MCAP ``rosbag2`` record's ``serialized_metadata``: the document of
+    :meth:`BagInfo.metadata` without its top-level key, as rosbag2's MCAP plugin writes it."""
+    return yaml.dump(document[BAG_KEY], Dumper=_DUMPER, sort_keys=False)
 
 
 def write_bag_metadata(bag_dir: str | Path, document: dict) -> Path:
