@@ -151,7 +151,8 @@ def test_every_topic_round_trips_through_the_ros2_decoder(run, log):
     assert links.points[1].x == pytest.approx(first[0].segments[0, 1, 0])
 
     ((msg, event),) = by_topic["/vjm_sim_node/events"]
-    assert event.data == "reset"
+    # the line the node publishes on ~/events, stating the log's own times (300 ticks of 1 ms)
+    assert event.data == ("reset: reset to the initial state after t = 0.3 s; simulated time goes on from t = 0.301 s")
     assert msg.log_time == end + tick == times[TICKS]
 
     (att,) = attachments

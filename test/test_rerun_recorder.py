@@ -106,7 +106,8 @@ def test_recording_verifies_and_holds_mechanism_and_series(run, recording):
         np.array(strips[0], dtype=float), samples[0].segments, rtol=0, atol=1e-6
     )  # positions are stored as float32
     _, events = columns(recording, "/events", "TextLog:text")
-    assert events == [["reset"]]
+    # the line the node publishes on ~/events (the first episode ends at 0.3 s, 1 ms ticks)
+    assert events == [["reset: reset to the initial state after t = 0.3 s; simulated time goes on from t = 0.301 s"]]
 
 
 def test_close_is_idempotent(run, tmp_path):

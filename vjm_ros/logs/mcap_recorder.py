@@ -9,7 +9,8 @@ Time. Every message is logged (``log_time`` = ``publish_time``) at the simulated
 in integer nanoseconds since the start of the recording; header stamps and ``/clock`` carry the
 same value. After a reset the simulator's clock restarts at 0 while the log time goes on (see
 :class:`vjm_ros.logs.Timebase`): the later episode starts one tick after the last message,
-and a ``reset`` string is logged on ``/<node>/events`` at that time.
+and the reset event the node publishes on ``~/events`` (:func:`vjm_ros.logs.events.reset_line`)
+is logged on ``/<node>/events`` at that time.
 
 What rosbag2 writes, this writes too (:mod:`vjm_ros.logs.rosbag2`): the ``ros2`` profile,
 ``ros2msg`` schemas named by their full type, ``cdr`` channels with the metadata
@@ -50,6 +51,7 @@ from vjm_ros.logs import (
     Timebase,
     atomic,
     cdr,
+    events,
     mcap_block,
     messages,
     msgdefs,
@@ -68,7 +70,6 @@ SCENE_ATTACHMENT = "scene.yaml"
 SCENE_MEDIA_TYPE = "application/yaml"
 SETTINGS_METADATA = "run_settings"
 VERSIONS_METADATA = "package_versions"
-RESET_EVENT = "reset"
 
 _COMPRESSION = {
     "zstd": CompressionType.ZSTD,
@@ -336,12 +337,15 @@ class McapRecorder(Recorder):
         ----------
         t : float, optional
             Simulator time at which the ending episode stopped, s (the last sample's when
-            omitted). Later samples are shifted to start one tick after it, where a ``reset`` event
-            is logged.
+            omitted). Later samples are shifted to start one tick after it, where the reset
+            event is logged with the text the node publishes (:func:`~vjm_ros.logs.events.
+            reset_line`).
         """
         self._check_open()
         ns = self.timebase.reset(t)
-        self._add(self.topics.events, messages.STRING, messages.event(RESET_EVENT), ns)
+        ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
+        text = events.reset_line(ended * 1e-9, ns * 1e-9)
+        self._add(self.topics.events, messages.STRING, messages.event(text), ns)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
 
     def _maybe_flush(self, ns: int) -> None:

@@ -44,7 +44,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from vjm_ros.core.model import ANGLE, GROUND, Model
-from vjm_ros.logs import Recorder, Timebase, atomic, messages, package_versions, tick_of
+from vjm_ros.logs import (
+    Recorder,
+    Timebase,
+    atomic,
+    events,
+    messages,
+    package_versions,
+    tick_of,
+)
 from vjm_ros.logs.storage import VIEWER_SCHEMES
 
 TIMELINE = "sim_time"
@@ -426,10 +434,12 @@ class RerunRecorder(Recorder):
         self._check_open()
         self.send()
         ns = self.timebase.reset(t)
+        ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
+        text = events.reset_line(ended * 1e-9, ns * 1e-9)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
         self._next_cyclograph_ns = ns
         self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
-        self.rec.log("events", rr.TextLog("reset", level="INFO"))
+        self.rec.log("events", rr.TextLog(text, level="INFO"))
 
     # ------------------------------------------------------------------ closing
     def _finalize(self) -> None:

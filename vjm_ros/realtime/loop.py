@@ -41,7 +41,7 @@ from typing import Protocol
 
 import numpy as np
 
-from vjm_ros.logs import Timebase
+from vjm_ros.logs import Timebase, events
 from vjm_ros.logs.rows import LogRows
 from vjm_ros.logs.storage import LogWriters
 from vjm_ros.realtime.commands import CommandBuffer
@@ -610,11 +610,7 @@ class TickLoop:
         self.monitor.reset()
         self._next_sigma = 0.0
         self.pacer.restart()
-        self.outputs.notice(
-            "reset",
-            f"reset to the initial state after t = {ended:.6g} s; simulated time goes on from "
-            f"t = {start:.6g} s",
-        )
+        self.outputs.notice(events.RESET, events.reset_text(ended, start))  # as the logs record it
         self._emit(self.sim.sample(singular_values=True))
         self._holding = self.options.wait_for_command
         with self._cv:

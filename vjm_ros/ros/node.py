@@ -82,6 +82,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from vjm_ros.core.errors import ConfigurationError, DivergenceError, VjmError
+from vjm_ros.logs import events
 from vjm_ros.logs.opening import open_recorders as open_log_recorders
 from vjm_ros.realtime.commands import CommandBuffer, Throttle, Verdict
 from vjm_ros.realtime.loop import LoopOptions, TickLoop
@@ -375,7 +376,7 @@ class SimNode(Node):
 
     def notice(self, kind: str, text: str) -> None:
         """Log an event (warnings throttled per kind) and publish it on ``~/events``."""
-        self._events_pub.publish(String(data=f"{kind}: {text}"))
+        self._events_pub.publish(String(data=events.line(kind, text)))
         if NOTICE_LEVELS.get(kind) == "warning":
             self._warn(kind, text)
         else:
