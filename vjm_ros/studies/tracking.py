@@ -3,7 +3,8 @@
 Two processes on this machine's ROS graph: ``vjm_sim_node`` (exact closure, 1 kHz, lockstep or
 realtime, recording its MCAP log) and ``vjm_ct_controller``. The log, read back with rosbags,
 gives the tracked point's path (from the joint states and the scene in the log) against the
-desired one: RMS and largest error after the approach, and the efforts. Re-run with::
+desired one: RMS and largest error after the approach, and the efforts. Both processes run on
+the environment's ``ROS_DOMAIN_ID`` (one of the study's own when it is not set). Re-run with::
 
     ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.tracking [--figure FILE]
 """
@@ -57,15 +58,45 @@ class Tracking:
     effort_names: list = field(default_factory=list)
 
 
+MAX_DOMAIN = 232
+"""The largest ``ROS_DOMAIN_ID`` ROS 2 accepts."""
+
+
+def ros_domain() -> int:
+    """The ROS domain of the study's simulator and controller.
+
+    The environment's ``ROS_DOMAIN_ID`` when it is set, so that a user can watch the run or keep
+    it apart from other graphs; otherwise one of the study's own, ``1 + pid % 101`` (within the
+    0-101 that every platform's DDS ports allow), named on stderr.
+
+    Raises
+    ------
+    ValueError
+        ``ROS_DOMAIN_ID`` is set to something other than a whole number from 0 to 232.
+    """
+    value = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not value:
+        domain = 1 + os.getpid() % 101
+        print(f"ROS_DOMAIN_ID is not set: the study runs on domain {domain}", file=sys.stderr)
+        return domain
+    if not (value.isascii() and value.isdigit()) or int(value) > MAX_DOMAIN:
+        raise ValueError(
+            f"ROS_DOMAIN_ID: expected a whole number from 0 to {MAX_DOMAIN}, found {value!r}")
+    return int(value)
+
+
 def _env(domain: int) -> dict:
     return dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(domain))
 
 
 def run_case(case: str, mode: str = "lockstep", duration: float = 4.0, settle: float = 1.5,
              domain: int | None = None) -> Tracking:
-    """Run one case (``mode`` ``lockstep`` or ``realtime``) and measure its tracking."""
+    """Run one case (``mode`` ``lockstep`` or ``realtime``) and measure its tracking.
+
+    ``domain``: the ROS domain of its two processes (default: :func:`ros_domain`).
+    """
     spec = CASES[case]
-    domain = domain if domain is not None else 1 + os.getpid() % 101
+    domain = domain if domain is not None else ros_domain()
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "run.mcap"
         sim_cmd = [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args",
@@ -181,11 +212,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--figure", type=Path, help="write the lockstep runs' figure here (PNG)")
     args = p.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    try:
+        domain = ros_domain()
+    except ValueError as exc:
+        p.error(str(exc))  # exit code 2
     results = []
     for mode in args.modes:
         for case in args.cases:
             t0 = time.monotonic()
-            r = run_case(case, mode, args.duration)
+            r = run_case(case, mode, args.duration, domain=domain)
             results.append(r)
             print(f"{case:>28} {mode:>8}: RMS {r.rms_mm:.5f} mm, max {r.max_mm:.5f} mm, "
                   f"{r.states} states ({time.monotonic() - t0:.0f} s)", flush=True)
