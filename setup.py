@@ -26,6 +26,12 @@ setup(
         # 1.4 is the first reader that reads indexed ROS 2 files in time order correctly.
         "mcap>=1.4,<2",
         "mcap-ros2-support>=0.5,<1",
+        # vjm_ros/logs/mcap_block.py compresses the MCAP chunks itself (one zstd compressor kept
+        # for the whole file, at a chosen level; lz4 on request), importing both directly: mcap
+        # requires them too, but without a range. Lower bounds: the first releases with wheels
+        # for CPython 3.10, the lowest Python allowed here.
+        "zstandard>=0.16,<1",
+        "lz4>=4,<5",
         "rerun-sdk>=0.41,<0.42",
         # ROS 2 message definitions and type hashes for the logs (a pure-Python bag library).
         "rosbags>=0.11,<0.12",
