@@ -17,13 +17,22 @@ Inverse dynamics asks for the efforts ``tau`` with ``P tau = w``, ``P = S^T B`` 
 ``w = M_r udd + c_r + g_r``. With as many actuators as degrees of freedom the answer is unique;
 with more (redundant actuation, e.g. three_chain: 3 actuators, 2 DOF) it is the minimum-norm
 distribution ``tau = W^-1 P^T (P W^-1 P^T)^-1 w`` (weights ``W``), plus an optional internal
-preload along the null space of ``P`` (antagonistic efforts that move nothing), within the
-actuators' limits when a distribution within them exists.
+preload ``preload * z`` along the null space of ``P`` (antagonistic efforts that move nothing),
+within the actuators' limits when a distribution within them exists
+(:mod:`vjm_ros.control.distribution`). ``z`` has ``max |z_k| = 1`` and an orientation fixed by
+the pose alone (the generalized cross product of the rows of ``[A^T B]``), continuous along a
+motion and the same whichever independent coordinates are chosen.
 
 A singular configuration is one where ``A_v`` loses rank (the dependent coordinates are not
 determined by the independent ones); :meth:`ClosedChainModel.singularity_measure` is the smallest
 singular value of ``A_v`` and every method refuses a pose where it is below
-:data:`SINGULAR_TOLERANCE`. Physics: the package's own kinematics, dynamics and closure rows
+:data:`SINGULAR_TOLERANCE`. A point is singular where its task Jacobian ``J_t`` loses rank (the
+point cannot be accelerated in some direction, as five_bar's pin at its start, both arms
+stretched, although ``A_v`` is regular there): ``singularity_measure(q, point=...)`` is the
+smallest singular value of ``J_t``, and task-space inverse dynamics refuses a pose where it is
+below :data:`TASK_SINGULAR_TOLERANCE` times ``|J| |S|``. States are checked against the
+closures: positions within ``closure_tolerance``, rates with ``|A qd|`` within
+``velocity_tolerance``. Physics: the package's own kinematics, dynamics and closure rows
 (:mod:`vjm_ros.core`), the same compiled kernels as the simulator's, read through
 :meth:`~vjm_ros.core.mechanism.Mechanism.terms`. Joint-space inverse dynamics runs compiled as a
 whole (:mod:`vjm_ros.control.compiled`: ~12 us per call on three_chain); the rest forms the
@@ -39,7 +48,20 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_ros.core.errors import ConfigurationError, VjmError
+from vjm_ros.control.arguments import number_array, real, vector
+from vjm_ros.control.distribution import (
+    check_preload,
+    distribute,
+    inverse_weights,
+    null_direction,
+    preload_direction,
+)
+from vjm_ros.control.errors import (
+    ArgumentTypeError,
+    InfeasibleEffortsError,
+    SingularConfigurationError,
+)
+from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.core.mechanism import Mechanism, point_reader
 from vjm_ros.core.model import Model
 from vjm_ros.scene.assembly import assemble
@@ -49,14 +71,36 @@ SINGULAR_TOLERANCE = 1e-9
 """Smallest singular value of ``A_v`` (m per unit coordinate) below which a pose is singular."""
 CLOSURE_TOLERANCE = 1e-6
 """Largest closure residual of a state the dynamics accept, m or rad (assembly reaches 1e-10)."""
+UDD_UNIT = "rad/s^2 or m/s^2"
+"""Units of the independent accelerations, for messages."""
+CLOSURE_RATE = 1e3
+"""1/s: the default largest closure rate ``|A qd|`` a state may have is its closure tolerance
+times this rate. Measured over 5 s of free fall at 1 kHz (``vjm run``, rk4), the largest
+``|A qd|`` was 26-97 times the largest ``|C|`` per second, exact and penalty closure, on
+three_chain and five_bar (exact closure on five_bar: ``|C|`` <= 2.5e-8 m, ``|A qd|`` <= 9.5e-7 m/s
+at up to 70 rad/s); 1e3 leaves a factor of ten over those, while rates off the closures by a
+user's mistake (one joint's rate forgotten) are ~0.1-1 m/s."""
+TASK_SINGULAR_TOLERANCE = 1e-9
+"""Smallest singular value of a point's task Jacobian ``J_t = J S``, relative to the largest it
+can have, ``|J|_2 |S|_2`` (m per rad or per m), below which the point's acceleration cannot be
+chosen freely: the task Jacobian's numerical rank is below 2. Round-off leaves the computed
+``J_t`` about ``n eps cond(A_v) |J| |S|`` from the true one: at five_bar's start (both arms
+stretched, ``cond(A_v) = 1``) it gives 1.6e-16 m/rad for a true zero; ``cond(A_v)`` stays below
+2.6e4 along 5 s of three_chain's and five_bar's falls, ~3e-11 relative at worst. 1e-9 is above
+that, and what it refuses is far beyond any actuator: on five_bar it refuses elbows bent by less
+than 8e-9 rad, where 1 m/s^2 of the pin needs more than 1e7 N m (1 N m with the elbows bent by
+0.1 rad)."""
 
-
-class SingularConfigurationError(VjmError):
-    """The dependent coordinates are not determined at this pose (``A_v`` loses rank)."""
-
-
-class InfeasibleEffortsError(VjmError):
-    """No distribution of efforts within the actuators' limits gives the asked motion."""
+__all__ = [
+    "ArgumentTypeError",
+    "ClosedChainModel",
+    "InfeasibleEffortsError",
+    "ReducedDynamics",
+    "SingularConfigurationError",
+    "distribute",
+    "null_direction",
+    "preload_direction",
+]
 
 
 @dataclass(frozen=True)
@@ -77,6 +121,11 @@ class ReducedDynamics:
         ``s``: ``qdd = S udd + s``.
     effort_map : ndarray, shape (d, m)
         ``P = S^T B``.
+    preload_direction : ndarray, shape (m,), or None
+        ``z``, the oriented direction of the efforts that move nothing (``P z = 0``,
+        ``max |z_k| = 1``, continuous along a motion:
+        :func:`~vjm_ros.control.distribution.preload_direction`); None unless there is one
+        actuator more than degrees of freedom.
     """
 
     mass_matrix: np.ndarray
@@ -85,6 +134,7 @@ class ReducedDynamics:
     velocity_map: np.ndarray
     acceleration_bias: np.ndarray
     effort_map: np.ndarray
+    preload_direction: np.ndarray | None = None
 
 
 class ClosedChainModel:
@@ -100,6 +150,10 @@ class ClosedChainModel:
         Largest closure residual of a state the dynamics accept, m or rad: the default suits
         assembled states and exact closure; a controller reading a penalty-closed simulator
         (closures met to ~1 mm) passes a looser bound.
+    velocity_tolerance : float, optional
+        Largest closure rate ``|A qd|`` of the rates ``qd`` the dynamics accept, m/s or rad/s;
+        default ``closure_tolerance * CLOSURE_RATE`` (1e-3 m/s with the default closure
+        tolerance; a penalty-closed simulator's rates are off by up to ~0.2 m/s).
 
     Raises
     ------
@@ -108,9 +162,14 @@ class ClosedChainModel:
     """
 
     def __init__(self, model: Model, independent: Sequence[str] | None = None,
-                 closure_tolerance: float = CLOSURE_TOLERANCE) -> None:
+                 closure_tolerance: float = CLOSURE_TOLERANCE,
+                 velocity_tolerance: float | None = None) -> None:
         self.model = model
-        self.closure_tolerance = float(closure_tolerance)
+        self.closure_tolerance = _tolerance(closure_tolerance, "closure_tolerance", "m or rad")
+        self.velocity_tolerance = (self.closure_tolerance * CLOSURE_RATE
+                                   if velocity_tolerance is None
+                                   else _tolerance(velocity_tolerance, "velocity_tolerance",
+                                              "m/s or rad/s"))
         self.mechanism = Mechanism.reader(model)
         self.n = model.n
         q0, _ = model.initial_state()
@@ -134,6 +193,7 @@ class ClosedChainModel:
         self.actuated = [a.joint for a in model.actuators]
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self.selection = model.actuator_matrix()
+        self._row_closure = [c.name for c in model.closures for _ in range(c.rows)]
         self._points = {p.name: i for i, p in enumerate(model.points)}
         self._point_reader = point_reader(model, [p.ref for p in model.points])
 
@@ -158,6 +218,8 @@ class ClosedChainModel:
 
         Raises
         ------
+        ArgumentTypeError
+            Not numbers (text, booleans, ...).
         ConfigurationError
             Wrong length, unknown or missing joint names, or non-finite values.
         """
@@ -173,18 +235,11 @@ class ClosedChainModel:
                 raise ConfigurationError(f"{name}: expected a value for every joint, missing "
                                          f"{', '.join(missing)}")
             values = [values[k] for k in names]
-        out = np.asarray(values, dtype=float).reshape(-1)
+        unit = "rad/s or m/s" if name.startswith("qd") else "rad or m"
+        out = number_array(values, name, f"{self.n} numbers ({unit}) or a {{joint: value}} map")
         if out.shape != (self.n,):
             raise ConfigurationError(f"{name}: expected {self.n} values ({', '.join(names)}), "
                                      f"found {out.size}")
-        if not np.all(np.isfinite(out)):
-            raise ConfigurationError(f"{name}: expected finite values, found {out.tolist()}")
-        return out
-
-    def _vector(self, values, size: int, name: str) -> np.ndarray:
-        out = np.asarray(values, dtype=float).reshape(-1)
-        if out.shape != (size,):
-            raise ConfigurationError(f"{name}: expected {size} values, found {out.size}")
         if not np.all(np.isfinite(out)):
             raise ConfigurationError(f"{name}: expected finite values, found {out.tolist()}")
         return out
@@ -242,7 +297,7 @@ class ClosedChainModel:
         ConfigurationError
             The closures cannot be met from this guess.
         """
-        u = self._vector(u, self.dof, "u")
+        u = vector(u, self.dof, "u", "rad or m")
         q = self.model.initial_state()[0] if guess is None else self.coordinates(guess, "guess")
         q = q.copy()
         q[self.independent] = u
@@ -261,6 +316,7 @@ class ClosedChainModel:
             raise ConfigurationError(
                 f"q: expected a state that meets the closures (within {self.closure_tolerance:g}), "
                 f"found a residual of {np.max(np.abs(terms.residual)):.3g}; use assemble()")
+        self._check_rates(terms.rate)
         a = terms.jacobian
         a_v = a[:, self.dependent]
         sv = np.linalg.svd(a_v, compute_uv=False) if a_v.size else np.ones(1)
@@ -276,7 +332,19 @@ class ClosedChainModel:
             solve = np.linalg.solve(a_v, np.column_stack((a[:, self.independent], terms.bias)))
             s_map[self.dependent] = -solve[:, : self.dof]
             bias[self.dependent] = -solve[:, self.dof]
-        return s_map, bias
+        return s_map, bias, a
+
+    def _check_rates(self, rate: np.ndarray) -> None:
+        """Refuse joint rates whose closure rates ``A qd`` exceed the velocity tolerance."""
+        if not rate.size:
+            return
+        row = int(np.argmax(np.abs(rate)))
+        if abs(rate[row]) > self.velocity_tolerance:
+            raise ConfigurationError(
+                f"qd: expected joint rates that keep the closures (|A qd| within "
+                f"{self.velocity_tolerance:g} m/s or rad/s), found {rate[row]:.3g} on closure "
+                f"{self._row_closure[row]!r}; use dependent_velocities() for the dependent rates "
+                f"(or pass velocity_tolerance)")
 
     def velocity_map(self, q) -> np.ndarray:
         """``S``, shape (n, d): ``qd = S ud``."""
@@ -285,37 +353,80 @@ class ClosedChainModel:
 
     def dependent_velocities(self, q, ud) -> np.ndarray:
         """Full joint rates ``qd = S ud``, shape (n,)."""
-        return self.velocity_map(q) @ self._vector(ud, self.dof, "ud")
+        return self.velocity_map(q) @ vector(ud, self.dof, "ud", "rad/s or m/s")
 
-    def singularity_measure(self, q) -> float:
-        """Smallest singular value of ``A_v`` (0 at a singular configuration)."""
+    def singularity_measure(self, q, point: str | None = None) -> float:
+        """How far the pose is from a singular configuration (0 at one).
+
+        Parameters
+        ----------
+        q : array_like or mapping
+            Coordinates, rad or m.
+        point : str, optional
+            A named point: the measure is then the smallest singular value of its task
+            Jacobian ``J_t`` (m per rad or per m; 0 where the point cannot be moved in some
+            direction by the independent coordinates, such as five_bar's start, where both
+            arms are stretched). Without it: the smallest singular value of ``A_v`` (0 where
+            the dependent coordinates are not determined by the independent ones).
+
+        Returns
+        -------
+        float
+            ``inf`` for a mechanism without closures (no ``A_v``).
+
+        Raises
+        ------
+        SingularConfigurationError
+            With ``point``, where ``A_v`` itself is singular (``J_t`` is then undefined).
+        """
         q = self.coordinates(q)
+        if point is not None:
+            return float(np.linalg.svd(self.task_jacobian(q, point), compute_uv=False)[-1])
         a = self.constraint_jacobian(q)[:, self.dependent]
         return float(np.linalg.svd(a, compute_uv=False)[-1]) if a.size else math.inf
 
     def task_jacobian(self, q, point: str) -> np.ndarray:
         """``J_t``, shape (2, d): ``xd = J_t ud`` for a named point, m per rad (or m)."""
         q = self.coordinates(q)
-        s_map, _ = self._terms(q, np.zeros(self.n))
+        s_map = self._terms(q, np.zeros(self.n))[0]
         return self._point(point, q)[2] @ s_map
+
+    def _regular_task_jacobian(self, q: np.ndarray, point: str) -> np.ndarray:
+        """``J_t`` of a point, refused where its rank is below 2 (TASK_SINGULAR_TOLERANCE)."""
+        s_map = self._terms(q, np.zeros(self.n))[0]
+        jac = self._point(point, q)[2]
+        jt = jac @ s_map
+        scale = np.linalg.norm(jac, 2) * np.linalg.norm(s_map, 2)
+        sv = np.linalg.svd(jt, compute_uv=False)
+        rank = int(np.sum(sv > TASK_SINGULAR_TOLERANCE * scale))
+        if rank < 2:
+            raise SingularConfigurationError(
+                f"point: {point!r} cannot be accelerated in every direction at this pose of "
+                f"{self.model.name}: its task Jacobian has rank {rank} (expected 2; singular "
+                f"values {', '.join(f'{v:.3g}' for v in sv)} m/rad against "
+                f"{TASK_SINGULAR_TOLERANCE:g} x |J| |S| = {TASK_SINGULAR_TOLERANCE * scale:.3g});"
+                f" singularity_measure(q, point={point!r}) tells how close a pose is")
+        return jt
 
     def task_bias(self, q, qd, point: str) -> np.ndarray:
         """``J s + Jdot qd``, shape (2,), m/s^2: ``xdd = J_t udd + task_bias``."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
-        _, s = self._terms(q, qd)
+        s = self._terms(q, qd)[1]
         _, a_bias, jac = self._point(point, q, qd)
         return jac @ s + a_bias
 
     def reduced_dynamics(self, q, qd) -> ReducedDynamics:
         """``M_r``, ``c_r``, ``g_r`` (and ``S``, ``s``, ``P``) at a state (see the module doc)."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
-        s_map, s = self._terms(q, qd)
+        s_map, s, a = self._terms(q, qd)
         full = self.mechanism.terms(q, qd)[0]
         still = self.mechanism.terms(q)[0]
         m_r = s_map.T @ full.mass_matrix @ s_map
         g_r = s_map.T @ still.bias
         c_r = s_map.T @ (full.mass_matrix @ s + full.bias - still.bias)
-        return ReducedDynamics(m_r, c_r, g_r, s_map, s, s_map.T @ self.selection)
+        direction = (preload_direction(a, self.selection)
+                     if len(self.actuated) == self.dof + 1 else None)
+        return ReducedDynamics(m_r, c_r, g_r, s_map, s, s_map.T @ self.selection, direction)
 
     def inverse_dynamics(
         self,
@@ -342,34 +453,67 @@ class ClosedChainModel:
         weights : array_like, shape (m,), optional
             Effort weights of the minimum-norm distribution (redundant actuation).
         preload : float
-            Internal preload along the null space of ``P``, N m or N (its largest component).
+            Internal preload, N m or N: ``preload * z`` is added to the efforts, ``z`` the
+            null-space direction of ``P`` with ``max |z_k| = 1`` and ``det([P; z^T]) > 0``
+            (:mod:`vjm_ros.control.distribution`), continuous along a motion: the same preload
+            is the same antagonism everywhere. Needs one actuator more than degrees of freedom.
         respect_limits : bool
             Keep every effort within the scene's actuator limits (else report the request as
             infeasible); False returns the distribution whatever its size.
 
         Raises
         ------
-        SingularConfigurationError, InfeasibleEffortsError, ConfigurationError
+        SingularConfigurationError
+            ``A_v`` loses rank, or (with ``point``) the point's task Jacobian does (rank below 2
+            by :data:`TASK_SINGULAR_TOLERANCE`; the message names the point and the rank).
+        InfeasibleEffortsError
+            No efforts within the limits give the motion (names the actuator's joint).
+        ArgumentTypeError
+            Text or other non-numbers where numbers are expected (``udd="ab"``,
+            ``preload="20"``).
+        ConfigurationError
+            Wrong lengths, NaN or infinite values, unknown names, a state off the closures
+            (``q``) or rates off them (``qd``: ``|A qd|`` beyond ``velocity_tolerance``), a
+            nonzero ``preload`` without exactly one redundant actuator, ``udd`` together with
+            ``xdd``.
         """
+        preload = real(preload, "preload", "N m or N")
+        check_preload(preload, self.dof, len(self.actuated), self.model.name)
         if xdd is None and point is None and udd is not None and (
             getattr(self, "_compiled_id", None) is not None or self._compiled() is not None
         ):
             return self._inverse_dynamics_compiled(q, qd, udd, weights, preload, respect_limits)
-        rd = self.reduced_dynamics(q, qd)
+        q, qd = self.coordinates(q), self.coordinates(qd, "qd")
         if xdd is not None or point is not None:
-            if xdd is None or point is None or udd is not None:
-                raise ConfigurationError("give either udd, or point and xdd")
-            jt = self.task_jacobian(q, point)
-            if jt.shape != (2, 2):
-                raise ConfigurationError(f"xdd: a point's acceleration fixes 2 coordinates, the "
-                                         f"mechanism has {self.dof} degrees of freedom")
-            udd = np.linalg.solve(jt, self._vector(xdd, 2, "xdd") - self.task_bias(q, qd, point))
+            udd = self._task_accelerations(q, qd, udd, point, xdd)
         elif udd is None:
-            raise ConfigurationError("udd: expected the independent accelerations (or point, xdd)")
-        w = rd.mass_matrix @ self._vector(udd, self.dof, "udd") + rd.coriolis + rd.gravity
+            raise ConfigurationError(
+                f"udd: expected the independent accelerations ({self.dof} numbers, {UDD_UNIT}), "
+                f"or point and xdd, found none")
+        rd = self.reduced_dynamics(q, qd)
+        w = rd.mass_matrix @ vector(udd, self.dof, "udd", UDD_UNIT) + rd.coriolis + rd.gravity
         limits = self.limits if respect_limits else np.full(len(self.limits), np.inf)
-        return distribute(rd.effort_map, w, limits, weights, preload)
+        return distribute(rd.effort_map, w, limits, weights, preload, self.model.actuator_names,
+                          rd.preload_direction)
 
+    def _task_accelerations(self, q: np.ndarray, qd: np.ndarray, udd, point, xdd) -> np.ndarray:
+        """``udd`` that gives ``point`` the acceleration ``xdd``: ``J_t^-1 (xdd - task bias)``."""
+        if udd is not None:
+            raise ConfigurationError(
+                "udd and xdd: expected either udd (independent accelerations) or point and xdd "
+                "(a point's acceleration), found both")
+        if point is None:
+            raise ConfigurationError("point: expected the named point xdd accelerates, found none")
+        if xdd is None:
+            raise ConfigurationError(
+                f"xdd: expected the acceleration of {point!r} (2 numbers, m/s^2), found none")
+        xdd = vector(xdd, 2, "xdd", "m/s^2")
+        if self.dof != 2:
+            raise ConfigurationError(
+                f"xdd: expected a mechanism of 2 degrees of freedom (a point's acceleration fixes "
+                f"2 coordinates), found {self.dof} in {self.model.name}")
+        jt = self._regular_task_jacobian(q, point)
+        return np.linalg.solve(jt, xdd - self.task_bias(q, qd, point))
 
     # ------------------------------------------------------------------ compiled path
     def _compiled(self):
@@ -396,23 +540,17 @@ class ClosedChainModel:
         if not (type(qd) is np.ndarray and qd.shape == (n,) and qd.dtype == np.float64):
             qd = self.coordinates(qd, "qd")
         if not (type(udd) is np.ndarray and udd.shape == (self.dof,) and udd.dtype == np.float64):
-            udd = self._vector(udd, self.dof, "udd")
-        if weights is None:
-            winv = fast.ones
-        else:
-            wts = np.asarray(weights, dtype=float).reshape(-1)
-            if wts.shape != fast.ones.shape or not np.all(wts > 0):
-                raise ConfigurationError(
-                    f"weights: expected {len(fast.ones)} positive numbers, found {wts.tolist()}")
-            winv = 1.0 / wts
+            udd = vector(udd, self.dof, "udd", UDD_UNIT)
+        winv = fast.ones if weights is None else inverse_weights(weights, len(fast.ones))
         limits = self.limits if respect_limits else fast.unlimited
-        status = fast(q, qd, udd, winv, limits, self.closure_tolerance, SINGULAR_TOLERANCE)
+        status = fast(q, qd, udd, winv, limits, self.closure_tolerance, self.velocity_tolerance,
+                      SINGULAR_TOLERANCE, preload)
         if status == C.NONFINITE:
             self.coordinates(q)
             self.coordinates(qd, "qd")
-            self._vector(udd, self.dof, "udd")
-        if status == C.OFF_CLOSURES:
-            self._terms(q, qd)  # raises the error that names the residual
+            vector(udd, self.dof, "udd", UDD_UNIT)
+        if status in (C.OFF_CLOSURES, C.OFF_VELOCITIES):
+            self._terms(q, qd)  # raises the error that names the residual or the rate
         if status == C.SINGULAR:
             raise SingularConfigurationError(
                 f"q: a singular configuration of {self.model.name} (the dependent-coordinate "
@@ -420,58 +558,18 @@ class ClosedChainModel:
         if status == C.UNDERACTUATED:
             raise InfeasibleEffortsError(
                 "the actuators cannot produce every motion at this pose (S^T B has not full rank)")
-        if preload or status == C.BEYOND_LIMITS:
-            return distribute(fast.p.copy(), fast.w.copy(), limits, weights, preload)
+        if status == C.BEYOND_LIMITS:
+            direction = fast.direction.copy() if preload else None
+            return distribute(fast.p.copy(), fast.w.copy(), limits, weights, preload,
+                              self.model.actuator_names, direction)
         return fast.tau.copy()
 
 
-def distribute(p: np.ndarray, w: np.ndarray, limits: np.ndarray, weights=None,
-               preload: float = 0.0) -> np.ndarray:
-    """Efforts ``tau`` with ``P tau = w``: minimum ``W``-norm, plus a preload, within limits.
-
-    Parameters
-    ----------
-    p : ndarray, shape (d, m)
-    w : ndarray, shape (d,)
-    limits : ndarray, shape (m,)
-        Largest ``|tau_i|``.
-    weights : array_like, shape (m,), optional
-        Positive weights ``W`` (default: ones).
-    preload : float
-        Largest component of an added null-space effort (antagonistic, moves nothing).
-
-    Raises
-    ------
-    InfeasibleEffortsError
-        ``w`` cannot be produced within the limits (or ``P`` has not full row rank).
-    """
-    d, m = p.shape
-    wts = np.ones(m) if weights is None else np.asarray(weights, dtype=float).reshape(-1)
-    if wts.shape != (m,) or not np.all(wts > 0):
-        raise ConfigurationError(f"weights: expected {m} positive numbers, found {wts.tolist()}")
-    winv = 1.0 / wts
-    g = (p * winv) @ p.T
-    if np.linalg.matrix_rank(g) < d:
-        raise InfeasibleEffortsError(
-            "the actuators cannot produce every motion at this pose (S^T B has not full rank)")
-    tau = winv * (p.T @ np.linalg.solve(g, w))
-    null = np.eye(m) - (winv[:, None] * p.T) @ np.linalg.solve(g, p)
-    if preload and m > d:
-        _, _, vt = np.linalg.svd(p)
-        z = vt[-1] / np.max(np.abs(vt[-1]))
-        tau = tau + preload * z
-    if np.all(np.abs(tau) <= limits * (1 + 1e-12)):
-        return tau
-    if m > d:  # move along the null space into the box, if the box is reachable
-        from scipy.optimize import linprog
-
-        basis = np.linalg.svd(null)[0][:, : m - d]
-        res = linprog(np.zeros(m - d), A_ub=np.vstack((basis, -basis)),
-                      b_ub=np.concatenate((limits - tau, limits + tau)),
-                      bounds=[(None, None)] * (m - d), method="highs")
-        if res.status == 0:
-            return tau + basis @ res.x
-    worst = int(np.argmax(np.abs(tau) / limits))
-    raise InfeasibleEffortsError(
-        f"efforts beyond the limits: actuator {worst} needs {tau[worst]:.4g} against a limit of "
-        f"{limits[worst]:g} (no distribution within the limits gives this motion)")
+def _tolerance(value: object, name: str, unit: str) -> float:
+    """A positive tolerance; ``inf`` switches its check off."""
+    if isinstance(value, float) and value == math.inf:
+        return math.inf
+    out = real(value, name, unit)
+    if not out > 0:
+        raise ConfigurationError(f"{name}: expected a positive number ({unit}), found {out:g}")
+    return out

@@ -1,9 +1,11 @@
 """Compiled joint-space inverse dynamics of a closed chain, for controllers at 1 kHz and more.
 
 One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.step`, ``EVALUATE``) fills
-``M``, ``b``, ``A``, ``Adot qd`` and ``C`` into preallocated buffers; one compiled function
-(:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
-``P = S^T B`` and the minimum ``W``-norm efforts. The algebra is that of
+``M``, ``b``, ``A``, ``Adot qd``, ``C`` and ``A qd`` into preallocated buffers; one compiled
+function (:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
+``P = S^T B``, the minimum ``W``-norm efforts and the preload along the oriented null-space
+direction of ``P`` (the generalized cross product of its rows,
+:mod:`vjm_ros.control.distribution`). The algebra is that of
 :mod:`vjm_ros.control.closed_model` (checked equal to round-off in the tests), without Python-level
 array operations: the cost is the two calls' entry overhead plus a few microseconds of arithmetic.
 """
@@ -16,19 +18,22 @@ from vjm_ros.core import kernels as K
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.model import Model
 
-OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS = 0, 1, 2, 3, 4, 5
+OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS, OFF_VELOCITIES = range(7)
 """Status codes of :func:`reduced_inverse_dynamics`."""
 
 
 @K._jit
 def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuated, udd, winv,
-                             limits, closure_tolerance, singular_tolerance, tau, p_out, w_out):
-    """Minimum-norm efforts for independent accelerations ``udd``; a status code.
+                             limits, closure_tolerance, velocity_tolerance, singular_tolerance,
+                             preload, tau, p_out, w_out, z_out):
+    """Minimum-norm efforts plus preload for independent accelerations ``udd``; a status code.
 
     ``mm`` (n, n), ``bias`` (n,), ``jac`` (r, n), ``crow`` (r, 7) come from the kernel's
     evaluation; ``independent`` (d,), ``dependent`` (r,), ``actuated`` (m,) are coordinate
-    indices; ``winv`` (m,) the inverse weights, ``limits`` (m,) the largest efforts. Writes
-    ``tau`` (m,), ``p_out`` (d, m) and ``w_out`` (d,).
+    indices; ``winv`` (m,) the inverse weights, ``limits`` (m,) the largest efforts (N m or N),
+    ``preload`` (N m or N) the largest component of the null-space effort added (nonzero only
+    with ``m = d + 1``, checked by the caller). Writes ``tau`` (m,), ``p_out`` (d, m),
+    ``w_out`` (d,) and, with a preload, its direction ``z_out`` (m,).
     """
     n = mm.shape[0]
     d = independent.shape[0]
@@ -37,6 +42,9 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
     for i in range(r):
         if abs(crow[i, K.R_RES]) > closure_tolerance:
             return OFF_CLOSURES
+    for i in range(r):
+        if abs(crow[i, K.R_RATE]) > velocity_tolerance:
+            return OFF_VELOCITIES
     s_map = np.zeros((n, d))
     s_bias = np.zeros(n)
     for j in range(d):
@@ -66,10 +74,43 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
     if np.linalg.svd(g)[1][d - 1] < 1e-14 * max(1.0, np.abs(g).max()):
         return UNDERACTUATED
     tau[:] = winv * (p_out.T @ np.linalg.solve(g, w_out))
+    if preload != 0.0:
+        preload_direction(jac, actuated, z_out)
+        for k in range(m):
+            tau[k] += preload * z_out[k]
     for k in range(m):
         if abs(tau[k]) > limits[k]:
             return BEYOND_LIMITS
     return OK
+
+
+@K._jit
+def preload_direction(jac, actuated, z):
+    """Write into ``z`` (m,) the oriented direction of the efforts the closures balance.
+
+    The efforts' part of the generalized cross product of the rows of ``N = [A^T B]``
+    (n x (n + 1); ``A = jac`` (r, n), ``B`` selects the ``actuated`` coordinates (m,), with
+    ``r + m = n + 1``): ``z_k = (-1)^(n+r+k) det(N without column r + k)``, scaled to
+    ``max |z_k| = 1`` (:func:`vjm_ros.control.distribution.preload_direction`).
+    """
+    r, n = jac.shape
+    m = actuated.shape[0]
+    minor = np.zeros((n, n))
+    largest = 0.0
+    for k in range(m):
+        minor[:, :] = 0.0
+        for i in range(n):
+            for j in range(r):
+                minor[i, j] = jac[j, i]
+        c = r
+        for j in range(m):
+            if j != k:
+                minor[actuated[j], c] = 1.0
+                c += 1
+        z[k] = np.linalg.det(minor) if (n + r + k) % 2 == 0 else -np.linalg.det(minor)
+        largest = max(largest, abs(z[k]))
+    for k in range(m):
+        z[k] /= largest
 
 
 class CompiledInverseDynamics:
@@ -99,9 +140,11 @@ class CompiledInverseDynamics:
         self.out_a, self.out_b = np.empty(n), np.empty(n)
         self.work = K.workspace(n, len(self.buffers[4]))
         self.tau, self.p, self.w = np.empty(m), np.empty((d, m)), np.empty(d)
+        self.direction = np.empty(m)
 
     def __call__(self, q: np.ndarray, qd: np.ndarray, udd: np.ndarray, winv: np.ndarray,
-                 limits: np.ndarray, closure_tolerance: float, singular_tolerance: float) -> int:
+                 limits: np.ndarray, closure_tolerance: float, velocity_tolerance: float,
+                 singular_tolerance: float, preload: float) -> int:
         """Evaluate the model at ``(q, qd)`` and the efforts for ``udd``; a status code."""
         if not _finite(q, qd, udd):
             return NONFINITE
@@ -112,7 +155,8 @@ class CompiledInverseDynamics:
         _, mm, bias, _, crow, jac, _ = self.buffers
         return reduced_inverse_dynamics(mm, bias, jac, crow, self.independent, self.dependent,
                                         self.actuated, udd, winv, limits, closure_tolerance,
-                                        singular_tolerance, self.tau, self.p, self.w)
+                                        velocity_tolerance, singular_tolerance, preload,
+                                        self.tau, self.p, self.w, self.direction)
 
 
 @K._jit
