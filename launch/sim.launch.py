@@ -4,10 +4,15 @@
     ros2 launch vjm_ros sim.launch.py scene:=five_bar controller:=true   # five_bar, circle tracking
     ros2 launch vjm_ros sim.launch.py scene:=five_bar controller:=true lockstep:=true
     ros2 launch vjm_ros sim.launch.py namespace:=robot1                  # topics under /robot1
+    ros2 launch vjm_ros sim.launch.py namespace:=robot2 publish_clock:=false   # a second simulator
 
-The simulator reads config/sim_node.yaml; ``scene``, ``rate_hz`` and ``lockstep`` override it. The
-controller runs on simulated time (``use_sim_time``, default true: it follows the simulator's
-``/clock``). Uses only launch features of Humble, Jazzy and Kilted. Keep DDS discovery on the host
+/clock is absolute: in a graph of several simulators only one may publish it (the others get
+``publish_clock:=false``; ``multi_sim.launch.py`` starts several that way), else subscribers see
+simulated time step back and each simulator warns, naming the other.
+
+The simulator reads config/sim_node.yaml; ``scene``, ``rate_hz``, ``lockstep`` and
+``publish_clock`` override it. The controller runs on simulated time (``use_sim_time``, default
+true: it follows ``/clock``, which must then come from its simulator). Uses only launch features of Humble, Jazzy and Kilted. Keep DDS discovery on the host
 by exporting ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy and later) or
 ``ROS_LOCALHOST_ONLY=1`` (Humble) before launching. The ``launch`` packages are imported only here
 (they are not needed to run the nodes).
@@ -41,6 +46,9 @@ def generate_launch_description():
         DeclareLaunchArgument("rate_hz", default_value="1000.0", description="Tick rate, Hz."),
         DeclareLaunchArgument("lockstep", default_value="false",
                               description="Each tick waits for the controller's command."),
+        DeclareLaunchArgument("publish_clock", default_value="true",
+                              description="Publish /clock (false for every simulator of a graph "
+                                          "but one)."),
         DeclareLaunchArgument("controller", default_value="false",
                               description="Start the example PD controller (scene five_bar)."),
         DeclareLaunchArgument("use_sim_time", default_value="true",
@@ -57,6 +65,8 @@ def generate_launch_description():
                     "scene": scene,
                     "rate_hz": ParameterValue(LaunchConfiguration("rate_hz"), value_type=float),
                     "lockstep": ParameterValue(LaunchConfiguration("lockstep"), value_type=bool),
+                    "publish_clock": ParameterValue(LaunchConfiguration("publish_clock"),
+                                                    value_type=bool),
                     # With the controller, hold the start pose until its first command arrives.
                     "wait_for_command": ParameterValue(LaunchConfiguration("controller"),
                                                        value_type=bool),

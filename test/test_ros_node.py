@@ -496,6 +496,33 @@ def test_parameters_are_validated_at_run_time(harness):
     assert f"{NODE}/closures/pin/wrench" in {p.topic_name for p in h.node.publishers}
 
 
+def test_publish_clock_off_drops_the_clock_publisher_and_on_brings_it_back(harness):
+    """A simulator with ``publish_clock`` false holds no ``/clock`` publisher (so that, among
+    several simulators, the graph shows the one that owns the clock)."""
+    h = harness(rate_hz=100.0, substeps=2)  # two substeps: the thesis gains at 100 Hz (rk4)
+    h.start()
+
+    def set_clock(value):
+        request = SetParameters.Request(
+            parameters=[Parameter("publish_clock", value=value).to_parameter_msg()])
+        return h.call(SetParameters, f"{NODE}/set_parameters", request).results[0]
+
+    def clock_publishers():
+        return [(i.node_namespace, i.node_name)
+                for i in h.probe.get_publishers_info_by_topic("/clock")]
+
+    wait_for(lambda: len(h.messages("/clock")) > 5, 10.0, "/clock")
+    assert clock_publishers() == [("/", "vjm_sim_node")]
+    assert set_clock(False).successful
+    wait_for(lambda: not clock_publishers(), 10.0, "the /clock publisher to go")
+    count = len(h.messages("/clock"))
+    assert set_clock(True).successful
+    wait_for(lambda: len(h.messages("/clock")) > count + 5, 10.0, "/clock again")
+    assert clock_publishers() == [("/", "vjm_sim_node")]
+    clocks = [nanoseconds(m.clock) for m in h.messages("/clock")]
+    assert all(b > a for a, b in zip(clocks, clocks[1:], strict=False))
+
+
 # ---------------------------------------------------------------- the executable
 def test_config_file_lists_every_parameter_with_a_valid_value():
     import yaml

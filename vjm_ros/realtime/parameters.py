@@ -96,7 +96,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("rrd", "",
               "Path of a rerun recording (.rrd) written while running; empty: none.",
               applies=START),
-    ParamSpec("publish_clock", True, "Publish /clock (simulated time) every tick."),
+    ParamSpec("publish_clock", True,
+              "Publish /clock (simulated time) every tick. /clock is absolute: in a graph of "
+              "several simulators, false for all but one (false: no /clock publisher at all)."),
     ParamSpec("command_timeout", 0.5,
               "Wall-clock seconds the last valid command holds without a new one; then the "
               "efforts fall to zero (one warning). 0: hold forever.", 0.0, 3600.0),

@@ -17,7 +17,9 @@ topic                           type                                      when
                                                                           ``forces_rate_hz``
 ``~/closures/<name>/wrench``    ``geometry_msgs/WrenchStamped``           same
 ``~/energy``                    ``std_msgs/Float64MultiArray``            same
-``/clock``                      ``rosgraph_msgs/Clock``                   every tick
+``/clock``                      ``rosgraph_msgs/Clock``                   every tick (one simulator
+                                                                          of a graph; see
+                                                                          :mod:`~.clock_owner`)
 ``~/markers``                   ``visualization_msgs/MarkerArray``        ``marker_rate_hz`` (wall)
 ``/diagnostics``                ``diagnostic_msgs/DiagnosticArray``       1 Hz (wall)
 ``~/events``                    ``std_msgs/String``                       pause, step, reset, timeouts
@@ -75,7 +77,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
@@ -98,6 +99,7 @@ from vjm_ros.realtime.parameters import (
     ticks_between,
 )
 from vjm_ros.ros import conversions as conv
+from vjm_ros.ros.clock_owner import CONFLICT, ClockOwner
 from vjm_ros.ros.command_wire import MalformedCommand, joint_state_efforts, multi_array_values
 from vjm_ros.ros.runtime import (
     PolledGroup,
@@ -122,7 +124,7 @@ the 1 kHz ticks kept with the default, 99.7 % with 0.1 ms."""
 WARNING_PERIOD = 1.0
 """Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
 NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning",
-                 "log_failed": "warning"}
+                 "log_failed": "warning", CONFLICT: "warning"}
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -216,6 +218,7 @@ class SimNode(Node):
                                    self.get_namespace())
         self._throttle = Throttle(WARNING_PERIOD)
         self._make_publishers()
+        self._clock_owner = ClockOwner(self, self.notice, self.config.publish_clock)
         self._wrench_pubs: dict[str, object] = {}
         self._adopt(sim.model)
         self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
@@ -281,7 +284,6 @@ class SimNode(Node):
         self._joint_pub = self.create_publisher(JointState, "joint_states", 10)
         self._forces_pub = self.create_publisher(Float64MultiArray, "~/constraint_forces", 10)
         self._energy_pub = self.create_publisher(Float64MultiArray, "~/energy", 10)
-        self._clock_pub = self.create_publisher(Clock, "/clock", 10)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._events_pub = self.create_publisher(String, "~/events", 100)
@@ -292,7 +294,6 @@ class SimNode(Node):
         self._send_joints = raw_publish(self._joint_pub)
         self._send_forces = raw_publish(self._forces_pub)
         self._send_energy = raw_publish(self._energy_pub)
-        self._send_clock = raw_publish(self._clock_pub)
         self._send_markers = raw_publish(self._markers_pub)
 
     def _commands_for(self, sim: Simulator) -> CommandBuffer:
@@ -344,8 +345,9 @@ class SimNode(Node):
         self._scene_pub.publish(String(data=assembled_scene_yaml(self.scene)))
 
     def clock(self, t: float) -> None:
-        """Publish ``/clock``."""
-        self._send_clock(self._wire.clock_at(t))
+        """Publish ``/clock`` (opening its publisher when ``publish_clock`` was turned on)."""
+        send = self._clock_owner.send or self._clock_owner.open()
+        send(self._wire.clock_at(t))
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
@@ -367,7 +369,10 @@ class SimNode(Node):
 
     def diagnostics(self, report: dict, paused: bool, level: int | None = None,
                     message: str | None = None) -> None:
-        """Publish ``/diagnostics``."""
+        """Publish ``/diagnostics``; drop the ``/clock`` publisher once ``publish_clock`` is
+        false (so that the graph shows who owns the clock; this runs in the loop's thread)."""
+        if not self.loop.options.publish_clock:
+            self._clock_owner.close()
         if level is None:
             level, message = assess(report, paused)
         self._diag_pub.publish(conv.diagnostics(

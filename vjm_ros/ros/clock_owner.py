@@ -1,0 +1,115 @@
+"""The simulator's ``/clock`` publisher, and a watch for other publishers of ``/clock``.
+
+``/clock`` is an absolute topic: several simulators in one graph (one namespace each) that all
+publish it interleave their simulated times, and every subscriber sees time step back whenever
+a message of one follows a message of the other. Exactly one node
+of a graph may publish it; the others run with ``publish_clock:=false``, and then hold no
+``/clock`` publisher at all, so that the graph shows who owns the clock.
+
+:class:`ClockOwner` holds the node's publisher while ``publish_clock`` is true (opened and
+closed by the tick loop's thread, the only one that publishes on it) and, every
+:data:`CHECK_PERIOD` seconds in the executor's thread (never in a tick), looks up the other
+publishers of ``/clock`` in the ROS graph (``get_publishers_info_by_topic``, about 0.1 ms): each
+one that appears is reported once, by name and namespace.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable, Iterable
+
+from rclpy.clock import Clock as WallClock
+from rclpy.clock import ClockType
+from rosgraph_msgs.msg import Clock
+
+from vjm_ros.ros.runtime import raw_publish
+
+TOPIC = "/clock"
+CHECK_PERIOD = 1.0
+"""Seconds (steady clock) between two looks at the other publishers of ``/clock``."""
+CONFLICT = "clock_conflict"
+"""Kind of the notice that names another publisher of ``/clock``."""
+
+
+def full_name(namespace: str, name: str) -> str:
+    """``/ns/name`` of a node (``/name`` in the root namespace)."""
+    return f"{namespace.rstrip('/')}/{name}"
+
+
+def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[str]:
+    """Full names of the publishers of ``/clock`` besides this node's own one.
+
+    Parameters
+    ----------
+    publishers : iterable of (namespace, name)
+        Every publisher of ``/clock`` in the graph, by the node that holds it.
+    own : (namespace, name)
+        This node; one publisher of its name is its own (another node of the very same name
+        and namespace is still a rival).
+
+    Returns
+    -------
+    list of str
+        Sorted full names, one per other publisher.
+    """
+    count = Counter(publishers)
+    if count[own]:
+        count[own] -= 1
+    return sorted(full_name(ns, name) for (ns, name), k in count.items() for _ in range(k))
+
+
+class ClockOwner:
+    """The ``/clock`` publisher of a node and the watch for others.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+    notice : callable
+        ``notice(kind, text)``: reports :data:`CONFLICT` (the node logs a warning and publishes
+        it on ``~/events``).
+    publish : bool
+        Open the publisher now (``publish_clock`` at start).
+    """
+
+    def __init__(self, node, notice: Callable[[str, str], None], publish: bool):
+        self._node = node
+        self._notice = notice
+        self.publisher = None
+        self.send: Callable[[bytes], None] | None = None
+        """Publish one serialized ``rosgraph_msgs/Clock``; None while closed."""
+        self._reported: frozenset[str] = frozenset()
+        if publish:
+            self.open()
+        self._timer = node.create_timer(CHECK_PERIOD, self.check,
+                                        clock=WallClock(clock_type=ClockType.STEADY_TIME))
+
+    def open(self) -> Callable[[bytes], None]:
+        """Create the publisher if it is closed (tick loop's thread); return :attr:`send`."""
+        if self.send is None:
+            self.publisher = self._node.create_publisher(Clock, TOPIC, 10)
+            self.send = raw_publish(self.publisher)
+        return self.send
+
+    def close(self) -> None:
+        """Destroy the publisher if it is open (tick loop's thread, after its last publish)."""
+        if self.publisher is not None:
+            self.send = None
+            self._node.destroy_publisher(self.publisher)
+            self.publisher = None
+
+    def check(self) -> None:
+        """Report each other publisher of ``/clock`` that appeared since the last look (only
+        while this node publishes it)."""
+        if self.send is None:
+            self._reported = frozenset()
+            return
+        node = self._node
+        found = rivals(((i.node_namespace, i.node_name)
+                        for i in node.get_publishers_info_by_topic(TOPIC)),
+                       (node.get_namespace(), node.get_name()))
+        new = sorted(set(found) - self._reported)
+        self._reported = frozenset(found)
+        if new:
+            self._notice(CONFLICT, (
+                f"/clock is also published by {', '.join(new)}: subscribers would see "
+                "simulated time step back; set publish_clock:=false on every simulator but one"))
