@@ -10,17 +10,19 @@ wraps such a compiled entry point:
    numba's cache, importing numba if no compiled function was needed before
    (:func:`vjm_ros.core.jit.activate`); when the compiled code is there (the usual case) it is
    loaded and every call goes to it, as without this module;
-2. otherwise the entry point is handed to a compile server, one child process per run
-   (``python -m vjm_ros.core.tiers``, at a lower priority, on the other core), and calls run
-   the function's plain-Python copy (:func:`interpreted`: the same source with every compiled
-   callee replaced by its own plain copy) until the child has written the compiled code into
-   numba's cache; the next call then loads it from there and runs compiled from then on.
+2. otherwise the entry point is handed to the compile server, a process of its own at a lower
+   priority, on the other core (:mod:`vjm_ros.core.compile_server`: one at a time on a machine,
+   detached from the run), and calls run the function's plain-Python copy (:func:`interpreted`:
+   the same source with every compiled callee replaced by its own plain copy) until the server
+   has written the compiled code into numba's cache; the next call then loads it from there and
+   runs compiled from then on.
 
 The plain copy computes the same numbers, bit for bit: numba compiles without fast-math, so each
 operation rounds as CPython's float arithmetic does (test/test_tiers.py holds both equal on the
 thesis scenes and the hub solves). One rule keeps it so: kernels write ``x * x``, not ``x ** 2``,
-which CPython computes with ``pow`` (an ulp off at times). A run that ends before the child has finished stops the child:
-nothing is left running, and the next run starts the same way.
+which CPython computes with ``pow`` (an ulp off at times). A run that ends before the server has
+finished leaves it to finish what it was asked for, and says so on stderr: the runs after it
+find the compiled code in the cache.
 
 ``VJM_TIERED=0`` in the environment switches this off: the first call then compiles in the
 calling process, as numba does on its own.
@@ -28,27 +30,16 @@ calling process, as numba does on its own.
 
 from __future__ import annotations
 
-import atexit
-import importlib
 import os
-import pickle
-import signal
-import struct
-import subprocess
-import sys
 import threading
 import time
 import types
 
 from vjm_ros.core import jit
+from vjm_ros.core.compile_server import server
 
 ENVIRONMENT = "VJM_TIERED"
 """Environment variable: ``0`` compiles in the calling process (no plain-Python tier)."""
-
-CHILD_NICENESS = 10
-"""Niceness added to the compile server: the run itself keeps the core it needs."""
-
-_FRAME = struct.Struct("<Q")
 
 
 def enabled() -> bool:
@@ -155,105 +146,6 @@ def load_cached(dispatcher, args: tuple) -> bool:
     return True
 
 
-# ---------------------------------------------------------------------------- compile server
-class CompileServer:
-    """The child process that compiles entry points into numba's cache, in request order.
-
-    Requests are pickled ``(number, module, name, args)`` frames on the child's stdin; the child
-    answers one line per request on its stdout (``ok <number>`` or ``error <number> <why>``),
-    which a thread of this process reads.
-    """
-
-    def __init__(self):
-        self._lock = threading.Lock()
-        self._answers: dict[int, str] = {}
-        self._events: dict[int, threading.Event] = {}
-        self._process: subprocess.Popen | None = None
-        self._count = 0
-
-    def request(self, module: str, name: str, args: tuple) -> int:
-        """Ask for ``module.name`` compiled for ``args``; returns the request's number."""
-        with self._lock:
-            self._count += 1
-            number = self._count
-            self._events[number] = threading.Event()
-            frame = pickle.dumps((number, module, name, args), protocol=pickle.HIGHEST_PROTOCOL)
-            try:
-                process = self._start()
-                process.stdin.write(_FRAME.pack(len(frame)) + frame)
-                process.stdin.flush()
-            except (OSError, ValueError) as exc:  # the child could not start or has gone
-                self._answers[number] = f"error {number} compile server unavailable: {exc}"
-                self._events[number].set()
-        return number
-
-    def done(self, number: int) -> bool:
-        """Whether request ``number`` has been answered (compiled, or failed)."""
-        return self._events[number].is_set()
-
-    def wait(self, number: int, timeout: float | None = None) -> bool:
-        """Wait for request ``number``; False on timeout."""
-        return self._events[number].wait(timeout)
-
-    def _start(self) -> subprocess.Popen:
-        if self._process is not None:
-            return self._process
-        # a failure is answered on stdout; the caller then compiles, and raises, itself
-        self._process = subprocess.Popen(
-            [sys.executable, "-m", "vjm_ros.core.tiers"], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, start_new_session=True)
-        threading.Thread(target=self._read, args=(self._process,), name="vjm-compile-answers",
-                         daemon=True).start()
-        atexit.register(self.stop)
-        return self._process
-
-    def _read(self, process: subprocess.Popen) -> None:
-        for raw in process.stdout:
-            line = raw.decode("utf-8", "replace").strip()
-            parts = line.split(" ", 2)
-            if len(parts) >= 2 and parts[1].isdigit():
-                number = int(parts[1])
-                with self._lock:
-                    self._answers[number] = line
-                    event = self._events.get(number)
-                if event is not None:
-                    event.set()
-        with self._lock:  # the child has gone: every open request fails (compiled here then)
-            for number, event in self._events.items():
-                if not event.is_set():
-                    self._answers[number] = f"error {number} compile server exited"
-                    event.set()
-
-    def stop(self) -> None:
-        """Stop the child (at exit, or when nothing more is needed from it)."""
-        process = self._process
-        if process is None or process.poll() is not None:
-            return
-        try:
-            process.stdin.close()
-        except OSError:
-            pass
-        process.terminate()
-        try:
-            process.wait(timeout=2.0)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-_SERVER: CompileServer | None = None
-_SERVER_LOCK = threading.Lock()
-
-
-def server() -> CompileServer:
-    """This process's compile server (started with the first request)."""
-    global _SERVER
-    with _SERVER_LOCK:
-        if _SERVER is None:
-            _SERVER = CompileServer()
-        return _SERVER
-
-
 # ---------------------------------------------------------------------------- entry points
 class Tiered:
     """A compiled entry point that runs as plain Python until its compiled code is available.
@@ -307,7 +199,7 @@ class Tiered:
 
     @property
     def tier(self) -> str:
-        """``"compiled"``, ``"plain"`` (plain Python while the child compiles) or ``"new"`` (not
+        """``"compiled"``, ``"plain"`` (plain Python while the compile server compiles) or ``"new"`` (not
         called yet, or only its first ``plain_calls``)."""
         if self.ready:
             return "compiled"
@@ -370,50 +262,3 @@ def entry(module: types.ModuleType, name: str, plain_calls: int = 0) -> Tiered:
     if found is None:
         found = _ENTRIES.setdefault(key, Tiered(module, name, plain_calls))
     return found
-
-
-# ---------------------------------------------------------------------------- the child
-def _read_frame(stream) -> bytes | None:
-    head = stream.read(_FRAME.size)
-    if len(head) < _FRAME.size:
-        return None
-    (size,) = _FRAME.unpack(head)
-    return stream.read(size)
-
-
-def _watch_parent(parent: int) -> None:
-    """Exit as soon as the process that started this one has gone (killed, say)."""
-    while True:
-        time.sleep(0.2)
-        if os.getppid() != parent:
-            os._exit(0)
-
-
-def serve() -> int:
-    """The compile server's loop (``python -m vjm_ros.core.tiers``)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
-    try:
-        os.nice(CHILD_NICENESS)
-    except OSError:  # pragma: no cover - not allowed here: same priority
-        pass
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
-    os.environ[ENVIRONMENT] = "0"
-    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
-    while True:
-        frame = _read_frame(stdin)
-        if frame is None:
-            return 0
-        number, module, name, args = pickle.loads(frame)
-        try:
-            jit.activate()
-            dispatcher = getattr(importlib.import_module(module), name)
-            dispatcher.compile(signature(dispatcher, args))
-            answer = f"ok {number}"
-        except Exception as exc:  # noqa: BLE001 - reported; the parent compiles it itself
-            answer = f"error {number} {type(exc).__name__}: {exc}".replace("\n", " ")
-        stdout.write(answer.encode() + b"\n")
-        stdout.flush()
-
-
-if __name__ == "__main__":
-    sys.exit(serve())
