@@ -6,6 +6,11 @@ block pipeline (:func:`vjm_ros.core.kernels.step`, :func:`vjm_ros.core.pipeline.
 and their copies with the hub solves (mechanisms with four chains or more on one pin), the CSV
 writer, and the controllers' compiled model. Compiled in this process (``VJM_TIERED=0``), one
 after the other: 1-2 minutes on a 2-core machine, seconds when the cache holds them already.
+
+Run it after ``pip install`` or ``colcon build`` (numba's cache is empty then), and after an edit
+of anything under ``vjm_ros/core/``. It holds the compile lock
+(:func:`vjm_ros.core.compile_server.holding_lock`): where a run's compile server is busy in the
+background, it waits for it first, then loads what that compiled.
 """
 
 from __future__ import annotations
@@ -20,10 +25,16 @@ from pathlib import Path
 
 def precompile(log=print) -> float:
     """Compile (or load) every entry point; returns the wall time taken, s."""
-    from vjm_ros.core import tiers
+    from vjm_ros.core import compile_server, tiers
 
     tiers.compile_first()
     start = time.perf_counter()
+    with compile_server.holding_lock(log):
+        _compile_all(log, start)
+    return time.perf_counter() - start
+
+
+def _compile_all(log, start: float) -> None:
     from vjm_ros.app.cli import main
     from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
     from vjm_ros.studies.bench.scaling import star_scene
@@ -39,7 +50,6 @@ def precompile(log=print) -> float:
     with contextlib.redirect_stdout(io.StringIO()):  # the controllers' compiled algebra
         main(["model", "five_bar"])
     log(f"... the controllers' model: {time.perf_counter() - start:.1f} s")
-    return time.perf_counter() - start
 
 
 if __name__ == "__main__":
