@@ -74,10 +74,15 @@ HAVE_NUMBA = _numba_installed()
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 
+UNCOMPILED_CORE = frozenset({"tiers.py", "compile_server.py"})
+"""Files of ``core/`` that decide where and when the compiled code is built, never what it is:
+an edit of them recompiles nothing."""
+
 COMPILED_SOURCES = tuple(sorted(
-    [*(_PACKAGE / "core").glob("*.py"), _PACKAGE / "control" / "compiled.py"]))
+    [*(p for p in (_PACKAGE / "core").glob("*.py") if p.name not in UNCOMPILED_CORE),
+     _PACKAGE / "control" / "compiled.py"]))
 """Files whose contents key every compiled function's cache: all of ``core/`` (the kernels and
-what they are built from) and the controllers' compiled algebra."""
+what they are built from) but :data:`UNCOMPILED_CORE`, and the controllers' compiled algebra."""
 
 
 @functools.lru_cache(maxsize=1)
