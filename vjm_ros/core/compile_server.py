@@ -347,8 +347,9 @@ class CompileServer:
                     + " is compiling the kernels in the background")
         else:
             return
-        print(f"vjm: {said}; later runs will be fast once it is done; `{PRECOMPILE}` compiles "
-              "them now, in the foreground", file=sys.stderr)
+        with contextlib.suppress(OSError, ValueError):  # stderr closed: nothing to tell
+            print(f"vjm: {said}; later runs will be fast once it is done; `{PRECOMPILE}` "
+                  "compiles them now, in the foreground", file=sys.stderr, flush=True)
 
     def stop(self) -> None:
         """Stop the server now, whatever it still has to compile."""
