@@ -9,6 +9,7 @@ non-finite value.
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -86,6 +87,9 @@ def real(value: object, name: str, unit: str = "") -> float:
     ConfigurationError
         NaN or infinite.
     """
+    if type(value) is float or type(value) is int:  # the common case, without the checks below
+        if math.isfinite(value):
+            return float(value)
     what = "a finite number" + (f" ({unit})" if unit else "")
     if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in NUMERIC_KINDS:
         value = value.item()
@@ -93,6 +97,6 @@ def real(value: object, name: str, unit: str = "") -> float:
         raise ArgumentTypeError(
             f"{name}: expected {what}, found {_shown(value)} ({type(value).__name__})")
     out = float(value)
-    if not np.isfinite(out):
+    if not math.isfinite(out):
         raise ConfigurationError(f"{name}: expected {what}, found {out}")
     return out
