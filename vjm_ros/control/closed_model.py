@@ -166,10 +166,9 @@ class ClosedChainModel:
                  velocity_tolerance: float | None = None) -> None:
         self.model = model
         self.closure_tolerance = _tolerance(closure_tolerance, "closure_tolerance", "m or rad")
-        self.velocity_tolerance = (self.closure_tolerance * CLOSURE_RATE
-                                   if velocity_tolerance is None
-                                   else _tolerance(velocity_tolerance, "velocity_tolerance",
-                                              "m/s or rad/s"))
+        self.velocity_tolerance = (
+            self.closure_tolerance * CLOSURE_RATE if velocity_tolerance is None
+            else _tolerance(velocity_tolerance, "velocity_tolerance", "m/s or rad/s"))
         self.mechanism = Mechanism.reader(model)
         self.n = model.n
         q0, _ = model.initial_state()
