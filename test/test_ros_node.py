@@ -414,6 +414,42 @@ def test_bytes_that_hold_no_command_are_refused_naming_the_field(harness):
     assert h.node.loop.commands.efforts.tolist() == [3.0]
 
 
+def diagnostic_values(msg):
+    return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def test_commands_beyond_the_scenes_sizes_are_refused_unread_and_counted(harness):
+    """While the node ticks (the tick loop reads the commands itself), a valid command whose
+    layout holds 1000 dimensions and a joint command of 5000 names are refused from their
+    counts, with a warning that says so, and counted in /diagnostics; a normal command then
+    still applies."""
+    from std_msgs.msg import MultiArrayDimension
+
+    h = harness(command_timeout=0.0)
+    h.start()
+    wait_for(lambda: len(h.messages("/joint_states")) > 5, 10.0, "the ticks")
+    wide = Float64MultiArray(data=[3.0])
+    wide.layout.dim = [MultiArrayDimension() for _ in range(1000)]
+    h.efforts.publish(wide)
+    h.named.publish(JointState(name=["crank_joint"] * 5000, effort=[1.0] * 5000))
+    wait_for(lambda: h.node.loop.commands.oversize == 2, 10.0, "the two refusals")
+    h.efforts.publish(Float64MultiArray(data=[3.0]))
+    wait_for(lambda: h.node.loop.commands.accepted == 1, 10.0, "the normal command")
+    assert h.node.loop.commands.rejected == 2
+    counted = {"refused_oversize_commands": "2", "commands_rejected": "2",
+               "commands_accepted": "1"}
+    wait_for(lambda: any(counted.items() <= diagnostic_values(m).items()
+                         for m in h.messages("/diagnostics")), 10.0, "the counts in /diagnostics")
+    expected = ["~/effort_commands: command refused: std_msgs/Float64MultiArray: layout.dim holds "
+                "1000 dimensions, more than the 8 a command to this scene can need (refused "
+                "unread)",
+                "~/joint_commands: command refused: sensor_msgs/JointState: name holds 5000 "
+                "names, more than the"]
+    wait_for(lambda: all(any(w in s for s in log_lines(h)) for w in expected), 10.0,
+             "the warnings")
+    assert h.node.loop.commands.efforts.tolist() == [3.0]
+
+
 # ---------------------------------------------------------------- services
 def test_pause_step_reset_services(harness):
     # 100 Hz ticks (slow enough to pause between them); two substeps keep the thesis gains

@@ -7,6 +7,9 @@ Rules (docs/design.md section 5 and the node's documentation):
 * a command is refused as a whole, with the reason, when it holds a non-finite value, has the
   wrong length, names an unknown or a non-actuated joint, names a joint twice, or carries no
   efforts; the efforts in force then do not change;
+* a command message bigger than the scene can need (:class:`SizeBounds`) is refused before it is
+  read, from the counts at the head of its fields (:meth:`CommandBuffer.refuse_oversize`): reading
+  one is the tick loop's time;
 * values beyond an actuator's limit are clamped to it (and reported);
 * the tick loop reads the buffer once at the start of every tick (:meth:`CommandBuffer.latch`):
   a command received while tick ``k`` runs therefore applies from tick ``k + 1`` on;
@@ -36,8 +39,9 @@ NOT_ACTUATED = "not_actuated"
 DUPLICATE_JOINT = "duplicate_joint"
 NO_EFFORTS = "no_efforts"
 MALFORMED = "malformed"
+OVERSIZE = "oversize"
 REJECTION_KINDS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, NOT_ACTUATED, DUPLICATE_JOINT, NO_EFFORTS,
-                   MALFORMED)
+                   MALFORMED, OVERSIZE)
 """Classes of refused commands (keys of the throttled warnings)."""
 
 
@@ -84,6 +88,55 @@ class Latched:
     efforts: np.ndarray
     fresh: bool
     timed_out: bool
+
+
+SIZE_SLACK = 32
+"""Entries a command may hold beyond the scene's joints before it is refused unread: a command
+a little too long still gets the reason that names its entries (wrong length, unknown or
+non-actuated joint, duplicate)."""
+MAX_LAYOUT_DIMS = 8
+"""Most layout dimensions of an effort command read (one describes a vector of efforts;
+ros2_control's forward command controllers send none)."""
+MAX_TEXT_BYTES = 256
+"""Longest layout label, and shortest longest joint name, read, in UTF-8 bytes."""
+
+
+@dataclass(frozen=True)
+class SizeBounds:
+    """The largest command messages a scene can need; bigger ones are refused before reading.
+
+    A valid command holds one effort per actuator (``~/effort_commands``), or at most one name
+    and effort per actuated joint (``~/joint_commands``), so nothing near these bounds can be
+    valid. The decoder compares the element counts at the head of each field with them before
+    any per-element work (``ros/command_wire.py``).
+
+    Attributes
+    ----------
+    values : int
+        Most values of ``data`` (``Float64MultiArray``) or ``effort`` (``JointState``).
+    names : int
+        Most entries of ``name`` (``JointState``).
+    name_bytes : int
+        Longest name, UTF-8 bytes.
+    dims : int
+        Most entries of ``layout.dim`` (``Float64MultiArray``).
+    label_bytes : int
+        Longest ``layout.dim.label``, UTF-8 bytes.
+    """
+
+    values: int
+    names: int
+    name_bytes: int
+    dims: int = MAX_LAYOUT_DIMS
+    label_bytes: int = MAX_TEXT_BYTES
+
+    @classmethod
+    def for_scene(cls, actuator_names: Sequence[str], joint_names: Sequence[str]) -> SizeBounds:
+        """Bounds for a scene: its joints plus :data:`SIZE_SLACK` entries, names no longer than
+        its longest joint name or :data:`MAX_TEXT_BYTES`."""
+        count = max(len(actuator_names), len(joint_names)) + SIZE_SLACK
+        longest = max((len(n.encode("utf-8")) for n in joint_names), default=0)
+        return cls(values=count, names=count, name_bytes=max(longest, MAX_TEXT_BYTES))
 
 
 LISTED = 8
@@ -137,8 +190,12 @@ class CommandBuffer:
         self._active = False
         self._fresh = False
         self._unchanged: Latched | None = None
+        self.size_bounds = SizeBounds.for_scene(self.actuator_names, self.joint_names)
+        """The largest command messages worth reading for this scene."""
         self.accepted = 0
         self.rejected = 0
+        self.oversize = 0
+        """Commands refused for their size, unread (also counted in :attr:`rejected`)."""
         self.clamped = 0
         self.timeouts = 0
 
@@ -227,6 +284,13 @@ class CommandBuffer:
     def refuse_malformed(self, reason: str) -> Verdict:
         """Count a command whose bytes held no readable message (``reason`` says where)."""
         return self._reject(MALFORMED, reason)
+
+    def refuse_oversize(self, reason: str) -> Verdict:
+        """Count a command refused unread, bigger than :attr:`size_bounds` (``reason`` says
+        which field and how big)."""
+        with self._cv:
+            self.oversize += 1
+        return self._reject(OVERSIZE, reason)
 
     def _reject(self, kind: str, reason: str) -> Verdict:
         with self._cv:

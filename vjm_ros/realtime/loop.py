@@ -555,6 +555,7 @@ class TickLoop:
         counters = {
             "commands_accepted": self.commands.accepted,
             "commands_rejected": self.commands.rejected,
+            "refused_oversize_commands": self.commands.oversize,
             "efforts_clamped": self.commands.clamped,
             "command_timeouts": self.commands.timeouts,
             "lockstep_timeouts": self.lockstep_timeouts,

@@ -100,7 +100,7 @@ from vjm_ros.realtime.parameters import (
 )
 from vjm_ros.ros import conversions as conv
 from vjm_ros.ros.clock_owner import CONFLICT, ClockOwner
-from vjm_ros.ros.command_wire import MalformedCommand, joint_state_efforts, multi_array_values
+from vjm_ros.ros.command_wire import submit_effort_bytes, submit_joint_command_bytes
 from vjm_ros.ros.runtime import (
     PolledGroup,
     Spinner,
@@ -397,21 +397,11 @@ class SimNode(Node):
     # ------------------------------------------------------------------ inputs (tick loop or executor thread)
     def _on_efforts(self, data: bytes) -> None:
         """A serialized ``~/effort_commands`` message (``Float64MultiArray``)."""
-        commands = self.loop.commands
-        try:
-            verdict = commands.submit_array(multi_array_values(data))
-        except MalformedCommand as exc:
-            verdict = commands.refuse_malformed(str(exc))
-        self._judge("~/effort_commands", verdict)
+        self._judge("~/effort_commands", submit_effort_bytes(self.loop.commands, data))
 
     def _on_joint_commands(self, data: bytes) -> None:
         """A serialized ``~/joint_commands`` message (``JointState``)."""
-        commands = self.loop.commands
-        try:
-            verdict = commands.submit_named(*joint_state_efforts(data))
-        except MalformedCommand as exc:
-            verdict = commands.refuse_malformed(str(exc))
-        self._judge("~/joint_commands", verdict)
+        self._judge("~/joint_commands", submit_joint_command_bytes(self.loop.commands, data))
 
     def _poll_commands(self) -> None:
         """Run the command handlers on what arrived since the previous tick (loop thread)."""
@@ -521,6 +511,7 @@ class SimNode(Node):
             "lockstep_timeouts": loop.lockstep_timeouts,
             "commands_accepted": loop.commands.accepted,
             "commands_rejected": loop.commands.rejected,
+            "refused_oversize_commands": loop.commands.oversize,
             "command_timeouts": loop.commands.timeouts,
             "max_closure_error": loop.monitor.max_closure_error,
         }
