@@ -16,7 +16,18 @@ from oracle.mechanism import Mechanism
 from vjm_ros.core.compiled import fuse_integrator, make_mechanism
 from vjm_ros.core.constraints import PenaltyClosure
 from vjm_ros.core.integrators import FIXED_STEP, INTEGRATORS, make_integrator
-from vjm_ros.core.model import PRISMATIC, Actuator, Chain, Joint, Link, Model
+from vjm_ros.core.model import (
+    GROUND,
+    PRISMATIC,
+    SLIDER,
+    Actuator,
+    Chain,
+    Closure,
+    Joint,
+    Link,
+    Model,
+    PointRef,
+)
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 # --------------------------------------------------------------------------- energy
@@ -143,8 +154,107 @@ def test_rk4_bound():
 
 
 def test_implicit_penalty_euler_is_unconditionally_stable():
-    """Oracle: the implicit treatment of the penalty forces has no step limit (bound inf)."""
-    assert make_integrator("implicit_euler").stability_bound(0.1) == np.inf
+    """Oracle: the implicit treatment of the penalty forces has no step limit (bound inf), and
+    its step map on the oscillator, |eig|^2 = det = 1 / (1 + 2 zeta x + x^2) below critical
+    damping, never grows (x = omega_n h up to 1e4)."""
+    integ = make_integrator("implicit_euler")
+    assert integ.stability_bound(0.1) == np.inf
+    x = np.geomspace(1e-3, 1e4, 200)
+    for zeta in (0.0, 0.3, 2.0):
+        step = integ.step_matrix((x * x)[:, None, None], (2 * zeta * x)[:, None, None], 1.0)
+        assert np.all(np.abs(np.linalg.eigvals(step)) <= 1.0 + 1e-12)
+
+
+# ------------------------------------------------ the analysis against the compiled kernel
+
+
+def sliding_blocks(masses, kp, kv):
+    """Blocks stacked on slides along y, each pinned to y = 0 by a penalty slider: linear.
+
+    One chain at the origin along x with prismatic joints only, so every angle is locked at 0:
+    block ``i`` sits at ``y_i = B_1 + ... + B_i``, ``M`` is constant, there is no Coriolis term
+    and no gravity, and each slider row is ``C_i = y_i`` (``A`` lower triangular of ones). The
+    closure dynamics are exactly ``C'' = -G Kp C - G Kv C'`` with ``G = A M^-1 A^T``, and so is
+    one step of any method run by the kernel on this mechanism.
+    """
+    k = len(masses)
+    model = Model.build(
+        "blocks",
+        (Chain("c", (0.0, 0.0), 0.0, 0.0, tuple(range(k))),),
+        tuple(Link(f"b{i}", 0, 0.0, m, 0.0, (0.0, 0.0)) for i, m in enumerate(masses)),
+        tuple(Joint(f"j{i}", PRISMATIC, 0.0, 0.0) for i in range(k)),
+        closures=tuple(
+            Closure(f"pin{i}", SLIDER, PointRef(i, (0.0, 0.0)), PointRef(GROUND, (0.0, 0.0)),
+                    (1.0, 0.0))
+            for i in range(k)
+        ),
+        gravity=(0.0, 0.0),
+    )
+    mech = make_mechanism(model, PenaltyClosure(np.asarray(kp, float), np.asarray(kv, float)))
+    a = np.tril(np.ones((k, k)))
+    mass = a.T @ np.diag(masses) @ a  # y = A B, T = 1/2 sum m_i y_i'^2
+    return mech, a, a @ np.linalg.solve(mass, a.T)
+
+
+def kernel_step_map(name, mech, a, h):
+    """One step of the registry's method, run by the compiled kernel, as a matrix on
+    ``(C, C')``: its columns are the steps from unit states (the map is linear)."""
+    integ = make_integrator(name)  # a Mechanism: advance_fixed, the kernel's steps
+    p = a.shape[0]
+    cols = []
+    for e in np.eye(2 * p):
+        q, qd = np.linalg.solve(a, e[:p]), np.linalg.solve(a, e[p:])  # C = A B, C' = A B'
+        q1, qd1 = integ.advance(mech, 0.0, q, qd, np.zeros(p), h, 1)
+        cols.append(np.concatenate((a @ q1, a @ qd1)))
+    return np.array(cols).T
+
+
+@pytest.mark.parametrize("name", FIXED_STEP)
+def test_step_matrix_is_the_kernels_step(name):
+    """The closed-form one-step map that the stiffness check uses equals one step of the
+    compiled kernel on an exactly linear mechanism: two coupled blocks, gains not proportional
+    (Kv != c Kp), steps from soft to past every bound (omega_n h ~ 0.1 .. 3)."""
+    masses, kp, kv = (1.5, 0.5), np.array([2.0, 3.0]), np.array([0.4, 1.1])
+    mech, a, g = sliding_blocks(masses, kp, kv)
+    integ = make_integrator(name)
+    for h in (0.1, 0.7, 1.3, 2.9):
+        got = kernel_step_map(name, mech, a, h)
+        want = integ.step_matrix(g * kp[None, :], g * kv[None, :], h)
+        # entries ~1e-2 .. 1e2 from a few products and a 2 x 2 solve of O(1) numbers: the two
+        # sides differ by round-off, ~1e-15 of the largest entry.
+        assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want)), (h, got, want)
+
+
+@pytest.mark.parametrize(
+    "name, zeta",
+    [
+        ("explicit_euler", 0.5),
+        ("explicit_euler", 1.5),
+        ("semi_implicit_euler", 0.1),
+        ("semi_implicit_euler", 0.7),
+        ("rk4", 0.0),
+        ("rk4", 0.3),
+        ("rk4", 1.5),
+    ],
+)
+def test_kernel_grows_just_above_the_bound(name, zeta):
+    """Oracle: the compiled kernel itself on ``x'' = -omega^2 x - 2 zeta omega x'`` (one block,
+    m = 1 kg, h = 1 s, omega = omega_n h): 400 steps from ``x = 1`` at 0.97 of the method's
+    bound decay, at 1.03 of it they grow."""
+    bound = make_integrator(name).stability_bound(zeta)
+    assert np.isfinite(bound)
+    sizes = []
+    for factor in (0.97, 1.03):
+        w = factor * bound
+        mech, _, _ = sliding_blocks((1.0,), [w * w], [2.0 * zeta * w])
+        integ = make_integrator(name)
+        q, qd = integ.advance(mech, 0.0, np.ones(1), np.zeros(1), np.zeros(1), 400.0, 400)
+        sizes.append(float(np.hypot(q[0], qd[0] / w)))
+    # 3 % off the bound the spectral radius of a step is <= 0.986 below and >= 1.015 above
+    # (explicit Euler at zeta = 0.5, the flattest case; 0.81 .. 0.94 and 1.06 .. 1.40 in the
+    # others): 400 steps scale the amplitude by <= e^-5.9 and >= e^6, far beyond the factor
+    # of a few that the eigenvectors' conditioning adds.
+    assert sizes[0] < 0.2 and sizes[1] > 5.0, sizes
 
 
 def test_registry_has_fixed_step_methods():

@@ -109,31 +109,41 @@ def run_until(sim, seconds: float) -> tuple[float, float | None]:
 
 
 # ------------------------------------------------------------------ stability function
-def test_stability_function_is_the_runge_kutta_polynomial():
-    """Oracle: R(z) = 1 + z (explicit Euler) and the degree-4 Taylor polynomial (RK4)."""
-    z = np.array([-1.0, -2.5 + 0.3j, 1j * 2.0, -0.2 - 2.7j, 0.4 + 0.1j])
-    # Four stages of products and sums of O(1) numbers: round-off ~1e-15.
-    assert np.allclose(make_integrator("explicit_euler").stability_function(z), 1 + z,
-                       rtol=0, atol=1e-13)
-    taylor = 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24
-    assert np.allclose(make_integrator("rk4").stability_function(z), taylor, rtol=0, atol=1e-13)
+TAYLOR = {"explicit_euler": (1.0, 1.0), "rk4": (1.0, 1.0, 1 / 2, 1 / 6, 1 / 24)}
+"""Coefficients of ``R(z) = sum c_k z^k``, the textbook stability functions of the Runge-Kutta
+methods (``y' = mu y`` is stepped to ``R(h mu) y``)."""
+
+
+def stability_function(name: str, z):
+    """``R(z)`` of a Runge-Kutta method (:data:`TAYLOR`)."""
+    return np.polynomial.polynomial.polyval(z, TAYLOR[name])
+
+
+def ray_bound(name: str, angle: float) -> float:
+    """Extent of ``|R(s exp(i angle))| <= 1`` from ``s = 0``: the smallest positive root of the
+    real polynomial ``|R|^2 - 1`` in ``s`` (0 when its lowest term is positive: growth at
+    once). Coefficients below 1e-12 are round-off of terms that cancel (``|R(iy)|^2`` has no
+    ``y^2`` or ``y^4`` term for RK4)."""
+    p = np.polynomial.Polynomial(np.array(TAYLOR[name]) * np.exp(1j * angle) ** np.arange(
+        len(TAYLOR[name])))
+    excess = (p * np.polynomial.Polynomial(p.coef.conj()) - 1.0).coef.real
+    low = next(k for k in range(1, excess.size) if abs(excess[k]) > 1e-12)  # s^low divides
+    if excess[low] > 0:
+        return 0.0
+    roots = np.roots(excess[low:][::-1])
+    return float(min(r.real for r in roots if abs(r.imag) < 1e-9 and r.real > 0))
 
 
 @pytest.mark.parametrize("name,angle,expect", [
     ("explicit_euler", math.pi, 2.0),  # |1 + z| = 1 at z = -2
+    ("explicit_euler", math.pi / 2, 0.0),  # |1 + i y|^2 = 1 + y^2
     ("rk4", math.pi, RK4_REAL),
     ("rk4", math.pi / 2, 2.0 * math.sqrt(2.0)),  # |R(iy)|^2 = 1 - y^6/72 + y^8/576
 ])
-def test_stability_region_along_the_axes(name, angle, expect):
-    """Oracle: the textbook extents of the stability regions along the real and imaginary axes."""
-    # |R| crosses 1 with a slope of order 1 there, and the bisection stops at 1e-12 of the
-    # crossing in |R|: the extent is found to ~1e-12, so 1e-9 relative is a safe margin.
-    assert make_integrator(name).stability_ray_bound(angle) == pytest.approx(expect, rel=1e-9)
-
-
-def test_explicit_euler_has_no_imaginary_axis():
-    """Oracle: |1 + i y| = sqrt(1 + y^2) > 1 for y > 0; the 1e-12 allowance passes y < 1.5e-6."""
-    assert make_integrator("explicit_euler").stability_ray_bound(math.pi / 2) < 2e-6
+def test_ray_bound_meets_the_textbook_extents(name, angle, expect):
+    """Oracle check: the extents of the stability regions along the real and imaginary axes."""
+    # roots of a degree <= 8 polynomial with O(1) coefficients: ~1e-14
+    assert ray_bound(name, angle) == pytest.approx(expect, rel=1e-12, abs=1e-12)
 
 
 @pytest.mark.parametrize("name", ["explicit_euler", "rk4"])
@@ -147,25 +157,16 @@ def test_oscillator_bound_agrees_with_the_stability_function(name, zeta):
     """
     integ = make_integrator(name)
     if zeta < 1.0:
-        expect = integ.stability_ray_bound(math.pi - math.acos(zeta))
+        expect = ray_bound(name, math.pi - math.acos(zeta))
     else:
-        expect = integ.stability_ray_bound(math.pi) / (zeta + math.sqrt(zeta * zeta - 1.0))
+        expect = ray_bound(name, math.pi) / (zeta + math.sqrt(zeta * zeta - 1.0))
     if name == "explicit_euler" and zeta == 0.0:
-        # Both extents are the round-off allowance (~1.4e-6), reached on different scales.
-        assert integ.stability_bound(0.0) < 2e-6 and expect < 2e-6
+        # The radius 1 + x^2/2 passes the check's 1e-12 allowance up to x ~ 1.4e-6.
+        assert expect == 0.0 and integ.stability_bound(0.0) < 2e-6
         return
-    # Both bisections stop within ~1e-12 of the crossing; the oscillator's spectral radius comes
+    # The bisection stops within ~1e-12 of the crossing; the oscillator's spectral radius comes
     # from 2 x 2 eigenvalues (~1e-15), so 1e-9 relative is safe.
     assert integ.stability_bound(zeta) == pytest.approx(expect, rel=1e-9)
-
-
-def test_semi_implicit_euler_has_no_scalar_stability_function():
-    """Semi-implicit Euler carries undamped oscillations up to omega_n h = 2, though the function
-    of its velocity update (1 + z) has no imaginary axis: the check uses the method's own step
-    on each mode, not R(z)."""
-    integ = make_integrator("semi_implicit_euler")
-    assert integ.stability_bound(0.0) == pytest.approx(2.0, rel=1e-7)
-    assert integ.stability_ray_bound(math.pi / 2) < 2e-6
 
 
 def test_step_matrix_is_r_of_hj_for_runge_kutta():
@@ -178,12 +179,11 @@ def test_step_matrix_is_r_of_hj_for_runge_kutta():
     k, d = g * kp[None, :], g * kv[None, :]
     h = 1e-3
     for name in ("explicit_euler", "rk4"):
-        integ = make_integrator(name)
-        step = integ.step_matrix(k, d, h)
+        step = make_integrator(name).step_matrix(k, d, h)
         mu = jacobian_eigenvalues(g, kp, kv)
         # Spectral radii of a well-conditioned 6 x 6 map: agreement to ~1e-12.
         assert np.max(np.abs(np.linalg.eigvals(step))) == pytest.approx(
-            np.max(np.abs(integ.stability_function(h * mu))), rel=1e-9)
+            np.max(np.abs(stability_function(name, h * mu))), rel=1e-9)
 
 
 # ------------------------------------------------------------------ modes
@@ -316,8 +316,7 @@ def test_per_row_passes_coupled_refuses_and_the_run_diverges(scene_name, residua
     kp, kv = probe.method.kp, probe.method.kv
     assert per_row_ratio(g, kp, kv, "rk4", probe.h) < 1.0
     mu = jacobian_eigenvalues(g, kp, kv)
-    rk4 = make_integrator("rk4")
-    assert np.max(np.abs(rk4.stability_function(probe.h * mu))) > 1.0 + 1e-3
+    assert np.max(np.abs(stability_function("rk4", probe.h * mu))) > 1.0 + 1e-3
     with pytest.raises(StiffnessError) as info:
         Simulator(scene.model, SimulationSettings(**base, **settings), scene.gains)
     msg = str(info.value)

@@ -5,8 +5,10 @@ Linearized near the closure manifold, the penalty closure error obeys
 (:func:`~vjm_ros.core.constraints.penalty_modes`): rows that share links ring together, and a
 coupled mode can be stiffer than any row alone. Each mode is a damped oscillator
 ``(omega_n, zeta)``; a fixed step ``h`` carries it while ``omega_n h`` stays within
-``integrator.stability_bound(zeta)``, computed from the method's own step (for a Runge-Kutta
-method the same as ``|R(h mu)| <= 1`` on both roots ``mu`` of the mode). Adaptive methods and
+``integrator.stability_bound(zeta)``, computed from the method's one-step map on linear systems
+(:meth:`~vjm_ros.core.integrators.base.FixedStepIntegrator.step_matrix`, checked against the
+compiled kernel's steps; for a Runge-Kutta method the same as ``|R(h mu)| <= 1`` on both roots
+``mu`` of the mode). Adaptive methods and
 ``implicit_euler`` have no bound (``inf``). The pose changes ``G`` as the mechanism moves; the
 check before a run judges the initial pose only (no cost per tick), and the divergence guard
 judges the last good poses when a run fails (docs/design.md section 2).
@@ -160,7 +162,7 @@ def closure_modes(
         and np.isfinite(integrator.stability_bound(0.0))
     ):
         # Modes of non-proportional gains are not independent oscillators: judge the
-        # method's own step on the coupled system as well.
+        # method's step on the coupled system as well.
         step = integrator.step_matrix(modes.stiffness, modes.damping, h)
         radius = float(np.max(np.abs(np.linalg.eigvals(step))))
     report = []

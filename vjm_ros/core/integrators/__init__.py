@@ -20,7 +20,6 @@ from vjm_ros.core.integrators.base import FixedStepIntegrator, Integrator
 from vjm_ros.core.integrators.fixed import (
     RK4,
     ExplicitEuler,
-    ExplicitRungeKutta,
     ImplicitPenaltyEuler,
     SemiImplicitEuler,
 )
@@ -77,7 +76,6 @@ __all__ = [
     "FIXED_STEP",
     "INTEGRATORS",
     "AdaptiveIntegrator",
-    "ExplicitRungeKutta",
     "FixedStepIntegrator",
     "Integrator",
     "make_integrator",
