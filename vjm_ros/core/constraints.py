@@ -156,20 +156,6 @@ def closure_mobility(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarra
     return 0.5 * (g + g.T)
 
 
-def effective_masses(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
-    """Effective mass of each closure row, ``1 / (A M^-1 A^T)_ii`` (arguments as
-    :func:`closure_mobility`).
-
-    Returns
-    -------
-    ndarray, shape (r,)
-        kg (kg m^2 for angle rows); ``inf`` for a row that no coordinate moves.
-    """
-    diag = np.diag(closure_mobility(mass_matrix, jacobian)).copy()
-    with np.errstate(divide="ignore"):
-        return np.where(diag > 0, 1.0 / np.maximum(diag, 1e-300), np.inf)
-
-
 @dataclass
 class PenaltyModes:
     """Coupled modes of the penalty closure error near the closure manifold.
