@@ -183,6 +183,8 @@ class Simulator:
         self.selection = model.actuator_matrix()
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self._closure_rows = model.n_rows
+        self._mobility: np.ndarray | None = None  # G at the initial state, when first asked
+        self._pipeline_ready = False
         self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = closure_method(model, self.settings, self.scene_gains,
@@ -215,7 +217,7 @@ class Simulator:
 
     def _initial_mobility(self) -> np.ndarray:
         """``G = A M^-1 A^T`` at the initial state, shape (r, r) (computed once)."""
-        if getattr(self, "_mobility", None) is None:
+        if self._mobility is None:
             self._mobility = mobility_at(self.model, self.q0, self.qd0)
         return self._mobility
 
@@ -303,8 +305,7 @@ class Simulator:
         """True when :meth:`advance_block` runs in one compiled call (a fixed-step integrator on
         the compiled kernel); loads nothing (the pipeline's first ticks may run as plain Python,
         :mod:`vjm_ros.core.tiers`)."""
-        return getattr(self.integrator, "kernel_method", None) is not None and hasattr(
-            self.mechanism, "warm_up_pipeline")
+        return self.integrator.fixed_step
 
     def blocks_compiled(self) -> bool:
         """True when :meth:`advance_block` runs in one compiled call (:meth:`runs_blocks`); loads
@@ -312,7 +313,7 @@ class Simulator:
         tens of ms), so that a timed run or a realtime loop does not pay for it."""
         if not self.runs_blocks():
             return False
-        if not getattr(self, "_pipeline_ready", False):
+        if not self._pipeline_ready:
             self.mechanism.warm_up_pipeline()
             self._pipeline_ready = True
         return True
