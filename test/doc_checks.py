@@ -167,14 +167,14 @@ _NODE_WARNINGS: list[str] = []
 
 def node_warnings(tmp_path: Path) -> list[str]:
     """What ``vjm_sim_node`` prints on five_bar given a command of three values, then one valid
-    command and nothing after it (``command_timeout`` 0.5 s); lines without their stamps. Run
-    once per test process (both warnings come from the one run)."""
+    command and nothing after it (``command_timeout`` 0.5 s, within the 0.7 s run); lines without
+    their stamps. Run once per test process (both warnings come from the one run)."""
     if _NODE_WARNINGS:
         return _NODE_WARNINGS
     (tmp_path / "commander.py").write_text(COMMANDER)
     env = command_env("tmp")
     node = start("exec vjm_sim_node --ros-args -p scene:=five_bar -p wait_for_command:=true "
-                 "-p duration:=1.0", tmp_path, env)
+                 "-p duration:=0.7", tmp_path, env)
     commander = start(f"exec {shlex.quote(str(VENV_BIN / 'python'))} commander.py", tmp_path, env)
     try:
         out = finish(node, HANG_GUARD, "vjm_sim_node")

@@ -159,13 +159,13 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
             "--collect-only", why=FULL_SUITE, slow=True, where="repo", timeout=600.0),
     ),
     ".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p duration:=5.0": (
-        Run(".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p duration:=0.5",
-            why="0.5 s of the 5 s run"),
+        Run(".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p duration:=0.2",
+            why="0.2 s of the 5 s run"),
     ),
     ".venv/bin/vjm_sim_node --ros-args --params-file config/sim_node.yaml -p mcap:=run.mcap": (
         Run(".venv/bin/vjm_sim_node --ros-args --params-file config/sim_node.yaml "
-            "-p mcap:=run.mcap -p duration:=0.5",
-            why="the file's duration 0 runs until SIGINT: 0.5 s here",
+            "-p mcap:=run.mcap -p duration:=0.2",
+            why="the file's duration 0 runs until SIGINT: 0.2 s here",
             after=file_written("run.mcap")),
     ),
     ".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p wait_for_command:=true &": (
@@ -185,7 +185,7 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
     "with AnyReader([Path('run.mcap')]) as r: print({c.topic: c.msgcount for c in "
     "r.connections})\"": (
         Run(why="run.mcap from `vjm run SCENE --mcap run.mcap`, as the section says",
-            before=".venv/bin/vjm run four_bar --duration 0.1 --mcap run.mcap",
+            before=".venv/bin/vjm run four_bar --duration 0.02 --mcap run.mcap",
             after=prints_the_topics),
     ),
     # CONTRIBUTING.md and docs/troubleshooting.md
