@@ -88,12 +88,8 @@ class SimulationSettings:
             raise ConfigurationError(
                 f"substeps: expected a whole number >= 1, found {self.substeps!r}"
             )
-        for key in ("kp", "kv", "omega_n", "zeta"):
-            v = getattr(self, key)
-            if v is not None and not (np.isfinite(v) and v >= 0):
-                raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
-        for key in ("alpha", "beta", "rtol", "atol"):
-            v = getattr(self, key)
+        for key in ("kp", "kv", "omega_n", "zeta", "alpha", "beta", "rtol", "atol"):
+            v = getattr(self, key)  # the fields by name: the message names the one refused
             if v is not None and not (np.isfinite(v) and v >= 0):
                 raise ConfigurationError(f"{key}: expected a finite number >= 0, found {v!r}")
         if self.kernel == "numpy":
