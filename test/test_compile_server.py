@@ -1,4 +1,4 @@
-"""The compile server (:mod:`vjm_ros.core.compile_server`): one at a time on a machine, detached from
+"""The compile server (:mod:`vjm_ros.jit.compile_server`): one at a time on a machine, detached from
 the run that started it, finishing what it was asked for after that run has ended.
 
 Oracles: the process table (``/proc``: which compile servers run with a given numba cache, their
@@ -31,7 +31,7 @@ TOY = textwrap.dedent('''
     import os
     import time
 
-    from vjm_ros.core.jit import jit
+    from vjm_ros.jit import jit
 
     while not os.path.exists(os.environ["VJM_TEST_GATE"]):  # the test opens the gate
         time.sleep(0.02)
@@ -44,7 +44,7 @@ TOY = textwrap.dedent('''
 
 RUN = textwrap.dedent('''
     import sys, time
-    from vjm_ros.core import compile_server
+    from vjm_ros.jit import compile_server
     server = compile_server.server()
     server.request("toy", "twice", (1.0,))
     print(server.pid, flush=True)
@@ -65,7 +65,7 @@ def servers_of(cache: Path) -> list[int]:
             env = (proc / "environ").read_bytes()
         except OSError:
             continue
-        if b"vjm_ros.core.compile_server" in cmd and f"NUMBA_CACHE_DIR={cache}\0".encode() in env:
+        if b"vjm_ros.jit.compile_server" in cmd and f"NUMBA_CACHE_DIR={cache}\0".encode() in env:
             found.append(int(proc.name))
     return found
 
@@ -120,7 +120,7 @@ def start_run(env: dict, lives: float = 0.0) -> subprocess.Popen:
 
 
 def lock_of(cache: Path):
-    from vjm_ros.core.compile_server import LOCK_NAME, CompileLock
+    from vjm_ros.jit.compile_server import LOCK_NAME, CompileLock
 
     (path,) = cache.glob(f"*/{LOCK_NAME}")
     return CompileLock(path)
@@ -201,7 +201,7 @@ def test_a_foreground_compile_waits_for_the_server(toy):
     env, cache, gate = toy
     out, _ = start_run(env).communicate(timeout=HANG_GUARD)  # hang guard
     pid = int(out.split()[-1])
-    script = ("import os\nfrom vjm_ros.core import compile_server\n"
+    script = ("import os\nfrom vjm_ros.jit import compile_server\n"
               "with compile_server.holding_lock(lambda text: print(text, flush=True)):\n"
               "    print('held', os.getpid(), flush=True)\n"
               "    input()\n")
@@ -224,9 +224,9 @@ def test_a_foreground_compile_waits_for_the_server(toy):
 
 def test_compile_server_reports_a_failure(tmp_path, monkeypatch):
     """A request the server cannot compile is answered with the reason, not left waiting."""
-    from vjm_ros.core.compile_server import CompileServer
+    from vjm_ros.jit.compile_server import CompileServer
 
-    monkeypatch.setattr("vjm_ros.core.compile_server.CompileLock.here",
+    monkeypatch.setattr("vjm_ros.jit.compile_server.CompileLock.here",
                         classmethod(lambda cls: cls(tmp_path / "lock")))
     server = CompileServer()
     try:

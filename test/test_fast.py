@@ -528,7 +528,7 @@ def test_without_numba_the_kernels_run_as_plain_python():
     script = (
         "import sys, numpy as np\n"
         "sys.modules['numba'] = None\n"  # as if numba were not installed
-        "from vjm_ros.core import jit\n"
+        "from vjm_ros.jit import deferred as jit\n"
         "assert not jit.HAVE_NUMBA\n"
         "from vjm_ros.core.compiled import make_mechanism\n"
         "from vjm_ros.core.constraints import ExactClosure\n"

@@ -1,4 +1,4 @@
-"""``core.jit.variant``: a compiled copy of a function that reads other module constants.
+"""``vjm_ros.jit.variant``: a compiled copy of a function that reads other module constants.
 
 numba takes module globals as compile-time constants and drops the branches a constant condition
 never takes before typing them; the kernels use it so that the plain ``kernels.step`` compiles
@@ -18,14 +18,14 @@ import textwrap
 
 import pytest
 
-from vjm_ros.core.jit import variant
+from vjm_ros.jit import variant
 
 pytest.importorskip("numba")
 
 TOY = textwrap.dedent('''
     import json
     import numpy as np
-    from vjm_ros.core.jit import jit, variant
+    from vjm_ros.jit import jit, variant
 
     FLAG = False
 

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_ros.core import jit, kernels, small_linalg
+from vjm_ros.core import kernels, small_linalg
+from vjm_ros.jit import deferred as jit
+from vjm_ros.jit.sources import COMPILED_SOURCES, sources_stamp
 
 pytest.importorskip("numba")
 
@@ -122,21 +124,21 @@ def test_rank_deficient_systems_drop_the_unconstrained_directions():
 def test_compiled_functions_are_keyed_on_every_compiled_source():
     """An edit of small_linalg.py must recompile kernels.step, which calls it (numba alone keys a
     cache on the defining file only)."""
-    assert Path(small_linalg.__file__).resolve() in jit.COMPILED_SOURCES
-    assert Path(kernels.__file__).resolve() in jit.COMPILED_SOURCES
+    assert Path(small_linalg.__file__).resolve() in COMPILED_SOURCES
+    assert Path(kernels.__file__).resolve() in COMPILED_SOURCES
     jit.activate()  # numba is imported when a compiled function is first needed
     if jit.LOCATORS_INSTALLED:
         locator = kernels.step._cache._impl.locator
-        assert locator.get_source_stamp() == jit.sources_stamp()
+        assert locator.get_source_stamp() == sources_stamp()
 
 
 def test_numba_starts_without_importing_scipy_linalg():
-    """numba's BLAS check finds scipy.linalg.cython_blas loaded alone (core/jit.py), so a start
+    """numba's BLAS check finds scipy.linalg.cython_blas loaded alone (jit/deferred.py), so a start
     does not import all of scipy.linalg; numba's BLAS and scipy.linalg still work after it."""
     code = "\n".join([
         "import sys",
         "import numpy as np",
-        "from vjm_ros.core import jit",
+        "from vjm_ros.jit import deferred as jit",
         "jit.activate()",  # imports numba, as the first compiled function needed does
         "from numba import njit",
         "from numba.core.registry import cpu_target",

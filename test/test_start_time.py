@@ -70,7 +70,7 @@ def test_the_section_shows_the_measured_figures():
 
 def test_a_warm_start_loads_the_compiled_code_without_numbas_compiler_tables(tmp_path):
     """Loading compiled functions from numba's cache skips the refresh of numba's typing and
-    lowering tables (``core.jit``): a fresh process that runs a tick from a filled cache has not
+    lowering tables (``vjm_ros.jit``): a fresh process that runs a tick from a filled cache has not
     imported the modules that refresh installs, and gives the same numbers as the process that
     compiled them. The first process fills the cache where it is cold (CI's fresh clone)."""
     import json

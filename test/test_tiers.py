@@ -1,4 +1,4 @@
-"""Tiered start (:mod:`vjm_ros.core.tiers`): plain Python while numba compiles in the background.
+"""Tiered start (:mod:`vjm_ros.jit.tiers`): plain Python while numba compiles in the background.
 
 Oracle: the compiled kernels themselves. The plain copies are the same source run by CPython, and
 numba compiles without fast-math, so every operation rounds the same way: the outputs must be
@@ -19,7 +19,8 @@ import pytest
 from conftest import FIXED_STEP_SETTINGS
 from test_compile_server import reap, servers_of
 
-from vjm_ros.core import pipeline, tiers
+from vjm_ros.core import pipeline
+from vjm_ros.jit import tiers
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
@@ -80,7 +81,7 @@ def test_plain_copy_reaches_every_compiled_callee():
     """Nothing in the plain copy of the pipeline calls a compiled function (which would compile
     it in this process, the very wait the plain tier is there to avoid), whether the copy was
     made before numba was imported (the callees deferred) or after (numba's dispatchers)."""
-    from vjm_ros.core.jit import is_compiled
+    from vjm_ros.jit.deferred import is_compiled
 
     seen, todo = set(), [tiers.interpreted(pipeline.advance_ticks_with_hub)]
     copies = {id(f) for f in tiers._PLAIN.values()}
@@ -136,7 +137,7 @@ def test_cold_run_writes_what_a_compiled_run_writes(tmp_path):
 
 
 def test_switched_off_by_the_environment(monkeypatch):
-    """``VJM_TIERED=0`` (and :func:`~vjm_ros.core.tiers.compile_first`, which the benchmarks
+    """``VJM_TIERED=0`` (and :func:`~vjm_ros.jit.tiers.compile_first`, which the benchmarks
     call) compiles before the first call."""
     monkeypatch.delenv(tiers.ENVIRONMENT, raising=False)
     assert tiers.enabled()
@@ -161,7 +162,7 @@ def _evaluate_args(scene: str) -> tuple:
 
 def test_the_first_calls_run_plain_without_loading_the_compiled_code(monkeypatch):
     """``plain_calls``: the first calls run the plain copy and load nothing; the next one loads
-    the compiled code; the outputs are the same bits. :meth:`~vjm_ros.core.tiers.Tiered.eager`
+    the compiled code; the outputs are the same bits. :meth:`~vjm_ros.jit.tiers.Tiered.eager`
     ends the plain calls at once, and with the tiers switched off there are none."""
     from vjm_ros.core import kernels
 
@@ -228,7 +229,7 @@ def test_a_short_run_never_imports_numba(tmp_path):
         "import sys\n"
         "from vjm_ros.app.cli import main\n"
         "code = main(['run', 'five_bar', '--duration', sys.argv[2], '--out', sys.argv[1]])\n"
-        "from vjm_ros.core import jit\n"
+        "from vjm_ros.jit import deferred as jit\n"
         "print(code, 'numba' in sys.modules, jit.active())\n")
 
     def run(folder: Path, seconds: float, tiered: str) -> list[str]:

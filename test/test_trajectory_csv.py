@@ -2,7 +2,7 @@
 
 The oracle is the writer the CSV had before it was batched: ``csv.writer`` with
 ``repr(float(x))`` per value, one row at a time. Equality is exact (the file is compared as bytes),
-for the compiled number formatting (:mod:`vjm_ros.core.float_text`) and for the ``repr`` path used
+for the compiled number formatting (:mod:`vjm_ros.sim.float_text`) and for the ``repr`` path used
 without numba.
 """
 
@@ -14,9 +14,8 @@ import io
 import numpy as np
 import pytest
 
-from vjm_ros.core import float_text
 from vjm_ros.scene.loader import load_scene
-from vjm_ros.sim import trajectory
+from vjm_ros.sim import float_text, trajectory
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
 from vjm_ros.sim.trajectory import Trajectory, csv_rows

@@ -258,7 +258,7 @@ def _settings(args, scene):
 
 def _tell_compiling(sim) -> bool:
     """Say so on stderr when the kernels run as plain Python while they compile (a first run on
-    a machine, :mod:`vjm_ros.core.tiers`); whether it was said."""
+    a machine, :mod:`vjm_ros.jit.tiers`); whether it was said."""
     if not getattr(sim.mechanism, "compiling", False):
         return False
     print("vjm: the compiled kernels are not in numba's cache yet (a first run on this "
@@ -268,7 +268,7 @@ def _tell_compiling(sim) -> bool:
 
 
 def _cmd_run(args) -> int:
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
     from vjm_ros.scene.loader import load_scene
     from vjm_ros.sim.simulator import RUN_BLOCK_TICKS, Simulator
     from vjm_ros.sim.trajectory import Trajectory

@@ -241,7 +241,7 @@ def render_section(r: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry: measure and print the table (or JSON)."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     p = argparse.ArgumentParser(prog="python -m vjm_ros.app.log_cost", description=__doc__)

@@ -1,15 +1,16 @@
 """Compile every entry point of the kernels into numba's cache now: ``python -m vjm_ros.app.precompile``.
 
 What ``scripts/setup`` runs, and what an installer or a container image build can run, so that
-no later run starts on the plain-Python tier (:mod:`vjm_ros.core.tiers`): the kernel and the
+no later run starts on the plain-Python tier (:mod:`vjm_ros.jit.tiers`): the kernel and the
 block pipeline (:func:`vjm_ros.core.kernels.step`, :func:`vjm_ros.core.pipeline.advance_ticks`)
 and their copies with the hub solves (mechanisms with four chains or more on one pin), the CSV
 writer, and the controllers' compiled model. Compiled in this process (``VJM_TIERED=0``), one
 after the other: 1-2 minutes on a 2-core machine, seconds when the cache holds them already.
 
 Run it after ``pip install`` or ``colcon build`` (numba's cache is empty then), and after an edit
-of anything under ``vjm_ros/core/``. It holds the compile lock
-(:func:`vjm_ros.core.compile_server.holding_lock`): where a run's compile server is busy in the
+of a compiled source (:data:`vjm_ros.jit.sources.COMPILED_SOURCES`: ``vjm_ros/core/`` and the
+like). It holds the compile lock
+(:func:`vjm_ros.jit.compile_server.holding_lock`): where a run's compile server is busy in the
 background, it waits for it first, then loads what that compiled.
 """
 
@@ -25,7 +26,7 @@ from pathlib import Path
 
 def precompile(log=print) -> float:
     """Compile (or load) every entry point; returns the wall time taken, s."""
-    from vjm_ros.core import compile_server, tiers
+    from vjm_ros.jit import compile_server, tiers
 
     tiers.compile_first()
     start = time.perf_counter()

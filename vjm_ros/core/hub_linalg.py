@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import math
 
-from vjm_ros.core.jit import jit as _jit
 from vjm_ros.core.small_linalg import lu_factor_range, lu_solve_range
+from vjm_ros.jit import jit as _jit
 
 # columns of a row of the closure layout (:func:`vjm_ros.core.packing.closure_layout`)
 H_OTHER, H_HUB, H_HIT_OTHER, H_HIT_HUB, H_ORDER = range(5)

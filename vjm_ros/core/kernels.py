@@ -56,9 +56,6 @@ import math
 import numpy as np
 
 from vjm_ros.core.hub_linalg import N_HUB_COLUMNS, hub_correction, hub_implicit_solve
-from vjm_ros.core.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
-from vjm_ros.core.jit import jit as _jit
-from vjm_ros.core.jit import variant as _variant
 from vjm_ros.core.small_linalg import (
     lu_factor_blocks,
     lu_factor_range,
@@ -66,6 +63,9 @@ from vjm_ros.core.small_linalg import (
     lu_solve_range,
     min_norm_correction,
 )
+from vjm_ros.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
+from vjm_ros.jit import jit as _jit
+from vjm_ros.jit import variant as _variant
 
 HINGE = 0
 SLIDER = 1

@@ -35,11 +35,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vjm_ros.core import kernels as K
-from vjm_ros.core import pipeline, tiers
+from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
 from vjm_ros.core.packing import chain_blocks, closure_layout, pack_method, pack_model
+from vjm_ros.jit import tiers
 
 
 @dataclass

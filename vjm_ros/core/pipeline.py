@@ -36,8 +36,8 @@ import math
 import numpy as np
 
 from vjm_ros.core import kernels as K
-from vjm_ros.core.jit import jit as _jit
-from vjm_ros.core.jit import variant as _variant
+from vjm_ros.jit import jit as _jit
+from vjm_ros.jit import variant as _variant
 
 OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints", "energy",
                "power", "dissipation", "segments")

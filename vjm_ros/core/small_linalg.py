@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from vjm_ros.core.jit import jit as _jit
+from vjm_ros.jit import jit as _jit
 
 
 @_jit(allocates=False)

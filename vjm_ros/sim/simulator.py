@@ -304,7 +304,7 @@ class Simulator:
     def runs_blocks(self) -> bool:
         """True when :meth:`advance_block` runs in one compiled call (a fixed-step integrator on
         the compiled kernel); loads nothing (the pipeline's first ticks may run as plain Python,
-        :mod:`vjm_ros.core.tiers`)."""
+        :mod:`vjm_ros.jit.tiers`)."""
         return self.integrator.fixed_step
 
     def blocks_compiled(self) -> bool:

@@ -14,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_ros.core import float_text, tiers
 from vjm_ros.core.model import ANGLE, Model
 from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
+from vjm_ros.jit import tiers
+from vjm_ros.sim import float_text
 from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
 
 ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
@@ -278,18 +279,18 @@ def csv_rows(table: np.ndarray) -> str:
 
 CSV_PLAIN_ROWS = 500
 """Tables of fewer rows are written by ``repr`` until the compiled writer is in use, where entry
-points start as plain Python (:mod:`vjm_ros.core.tiers`): 500 rows of the thesis scenes take a
+points start as plain Python (:mod:`vjm_ros.jit.tiers`): 500 rows of the thesis scenes take a
 few ms so, importing numba and loading the writer 0.3-0.4 s; a short run never imports numba."""
 
 
 def csv_bytes(table: np.ndarray) -> bytes:
     """CSV rows of ``table`` as ASCII bytes (see :func:`csv_rows`).
 
-    Compiled, :func:`vjm_ros.core.float_text.csv_bytes` writes them (about six times faster,
+    Compiled, :func:`vjm_ros.sim.float_text.csv_bytes` writes them (about six times faster,
     without holding the GIL); else the nested list's ``repr`` is split at ``"], ["`` and
     ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
     bracket or space): the same text. The latter also while numba compiles the former in the
-    background (:mod:`vjm_ros.core.tiers`), and for tables of fewer than
+    background (:mod:`vjm_ros.jit.tiers`), and for tables of fewer than
     :data:`CSV_PLAIN_ROWS` rows before it is loaded.
     """
     if len(table) == 0:

@@ -68,7 +68,7 @@ def evaluation_cost(scene: str, closure: str, steps: int, repeats: int) -> float
 
 def main(argv: list[str] | None = None) -> int:
     """Print the cost per evaluation of each scene and closure method, µs."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.kernel_cost",

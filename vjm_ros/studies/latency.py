@@ -177,7 +177,7 @@ def _format(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.latency", description=__doc__.split("\n")[0])

@@ -113,7 +113,7 @@ def measure(scene: str, seconds: float, extra: list[str]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.live_loop",

@@ -131,7 +131,7 @@ def measure(scene: str, seconds: float, repeats: int = 3) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.node_cost",

@@ -8,7 +8,7 @@
    printed, no files written) with numba's cache filled by a run before, median of ``repeats``;
 3. **cold**: the same process with ``NUMBA_CACHE_DIR`` set to a new, empty temporary directory:
    the kernels run as plain Python while a child process compiles them
-   (:mod:`vjm_ros.core.tiers`), median of ``cold_repeats``; and **cold, compiled first**: the
+   (:mod:`vjm_ros.jit.tiers`), median of ``cold_repeats``; and **cold, compiled first**: the
    same with ``VJM_TIERED=0``, every compiled entry point compiled before the first tick (one
    run);
 4. with ``--node``, **node warm**: the whole process of ``vjm_sim_node`` in fast mode for one
@@ -139,7 +139,7 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     its first calls, :data:`~vjm_ros.core.mechanism.STEP_PLAIN_CALLS`), ``simulator`` (the rest of
     building it), ``first_tick`` (one tick advanced and sampled: as plain Python where entry points
     start so, :data:`~vjm_ros.core.mechanism.PIPELINE_PLAIN_CALLS`), ``numba`` (numba imported and
-    the compiled functions made, :func:`vjm_ros.core.jit.activate`, which the next call of the
+    the compiled functions made, :func:`vjm_ros.jit.deferred.activate`, which the next call of the
     pipeline would do), ``compiled`` (from there until the ticks run compiled: the pipeline
     :func:`vjm_ros.core.pipeline.advance_ticks` loaded from numba's cache, or, cold, compiled in
     the background while ticks advance as plain Python, in calls of
@@ -159,7 +159,7 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
 
     import vjm_ros.logs.signals  # noqa: F401
     import vjm_ros.logs.storage  # noqa: F401
-    from vjm_ros.core import jit
+    from vjm_ros.jit import deferred
     from vjm_ros.scene.loader import load_scene
     from vjm_ros.sim.settings import resolve_settings
     from vjm_ros.sim.simulator import SampleBlock, Simulator
@@ -180,7 +180,7 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     sim.advance_block(block, 1)
     traj.extend(block)
     t = lap("first_tick", t)
-    jit.activate()
+    deferred.activate()
     t = lap("numba", t)
     deadline = t + TIMEOUT
     calls = 0
@@ -265,7 +265,7 @@ def render_section(row: dict, when: str) -> str:
         f"{len(row['warm_runs_s'])} runs warm (numba's cache filled) and of "
         f"{len(row['cold_runs_s'])} cold (an empty `NUMBA_CACHE_DIR`: the kernels run as plain "
         "Python, and a run longer than its first ticks has a child process compile them, "
-        "`vjm_ros.core.tiers`; a one-tick run ends before that), and one cold with "
+        "`vjm_ros.jit.tiers`; a one-tick run ends before that), and one cold with "
         "`VJM_TIERED=0` (every compiled entry point compiled before the first tick); "
         f"`python -c pass` takes {row['floor_s']:.2f} s.",
         "",

@@ -200,7 +200,7 @@ def figure(results: list[Tracking], path: str | Path) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: see the module documentation."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     p = argparse.ArgumentParser(prog="python -m vjm_ros.studies.tracking",

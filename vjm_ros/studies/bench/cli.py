@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     int
         0 on success, 2 on bad input.
     """
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     argv = list(sys.argv[1:] if argv is None else argv)

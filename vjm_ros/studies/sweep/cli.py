@@ -51,7 +51,7 @@ def tune_parser() -> argparse.ArgumentParser:
 
 def main(command: str, argv: list[str]) -> int:
     """``vjm sweep`` or ``vjm tune`` with their arguments."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
     parser = sweep_parser() if command == "sweep" else tune_parser()

@@ -90,7 +90,7 @@ class Engine:
 def _warm_up() -> None:
     """Load the compiled kernels in a worker (from numba's on-disk cache after the first time),
     compiled in the worker before its first run where the cache lacks them: runs are timed."""
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
     from vjm_ros.scene import load_scene
     from vjm_ros.sim.simulator import SimulationSettings, Simulator
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vjm_ros.core.jit import HAVE_NUMBA, jit
+from vjm_ros.jit import HAVE_NUMBA, jit
 
 COMPILED = HAVE_NUMBA
 """Whether :func:`csv_bytes` runs compiled (the CSV falls back to ``repr`` otherwise)."""

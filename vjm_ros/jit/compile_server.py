@@ -1,9 +1,9 @@
 """The compile server: a process that compiles entry points into numba's cache, one at a time on
 a machine, and finishes what it was asked for after the run that asked has ended.
 
-:mod:`vjm_ros.core.tiers` hands it the entry points numba's cache lacks (a first run after a pip
+:mod:`vjm_ros.jit.tiers` hands it the entry points numba's cache lacks (a first run after a pip
 or colcon install, an edit of a compiled source, a new ``NUMBA_CACHE_DIR``) while the run goes on
-as plain Python. The process (``python -m vjm_ros.core.compile_server``) is detached from the
+as plain Python. The process (``python -m vjm_ros.jit.compile_server``) is detached from the
 run: a session and process group of its own (Ctrl-C or SIGTERM to the run's group does not reach
 it; it ignores SIGINT and SIGHUP), working directory the folder the package is imported from,
 stdin and stdout private pipes to the run (requests and answers), stderr the log file
@@ -40,6 +40,8 @@ import threading
 import time
 from pathlib import Path
 
+from vjm_ros.jit import deferred, numba_internals
+
 try:
     import fcntl
 except ImportError:  # pragma: no cover - not POSIX: no lock
@@ -73,14 +75,12 @@ the same package whatever the run's working directory was and whatever becomes o
 
 # ---------------------------------------------------------------------------- the lock
 def cache_directory() -> Path | None:
-    """numba's cache directory of the kernels (``NUMBA_CACHE_DIR``, or next to the package, or the
-    user's cache directory where the package is read-only), as numba itself chose it; None where
-    nothing is cached (numba missing, ``NUMBA_DISABLE_JIT``). Imports numba if it was not."""
-    from vjm_ros.core import jit, kernels
-
-    dispatcher = jit.compiled(kernels.step)
-    path = getattr(getattr(dispatcher, "_cache", None), "_cache_path", None)
-    return None if path is None else Path(path)
+    """numba's cache directory of the package's compiled functions (``NUMBA_CACHE_DIR``, or next to
+    the package, or the user's cache directory where the package is read-only), as numba itself
+    chooses it; None where nothing is cached (numba missing, ``NUMBA_DISABLE_JIT``). Imports numba if it was not."""
+    if not deferred.activate():
+        return None
+    return numba_internals.cache_directory()
 
 
 class CompileLock:
@@ -276,7 +276,7 @@ class CompileServer:
             return None
         try:
             log = self._open_log()
-            command = [sys.executable, "-m", "vjm_ros.core.compile_server"]
+            command = [sys.executable, "-m", "vjm_ros.jit.compile_server"]
             try:
                 self._process = subprocess.Popen(
                     [*command, *([] if fd is None else ["--lock-fd", str(fd)])],
@@ -409,11 +409,9 @@ def _say(text: str) -> None:
 
 
 def _compile(module: str, name: str, args: tuple) -> None:
-    from vjm_ros.core import jit
-
-    jit.activate()
-    dispatcher = getattr(importlib.import_module(module), name)
-    dispatcher.compile(tuple(dispatcher.typeof_pyval(a) for a in args))
+    deferred.activate()
+    dispatcher = deferred.compiled(getattr(importlib.import_module(module), name))
+    dispatcher.compile(numba_internals.argument_types(dispatcher, args))
 
 
 def serve(lock_fd: int | None = None) -> int:
@@ -427,7 +425,7 @@ def serve(lock_fd: int | None = None) -> int:
         signal.signal(number, signal.SIG_IGN)
     with contextlib.suppress(OSError):
         os.nice(NICENESS)
-    from vjm_ros.core import tiers
+    from vjm_ros.jit import tiers
 
     tiers.compile_first()  # anything this process calls compiles here
     _say(f"compile server started, numba cache {os.environ.get('NUMBA_CACHE_DIR', '(default)')}")
@@ -463,10 +461,10 @@ def serve(lock_fd: int | None = None) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m vjm_ros.core.compile_server [--lock-fd N]`` (started by :class:`CompileServer`)."""
+    """``python -m vjm_ros.jit.compile_server [--lock-fd N]`` (started by :class:`CompileServer`)."""
     import argparse
 
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.core.compile_server")
+    parser = argparse.ArgumentParser(prog="python -m vjm_ros.jit.compile_server")
     parser.add_argument("--lock-fd", type=int, default=None)
     return serve(parser.parse_args(argv).lock_fd)
 

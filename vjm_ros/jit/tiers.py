@@ -8,10 +8,10 @@ wraps such a compiled entry point:
 1. its first call (after its first ``plain_calls``, which run the plain copy below: numba and
    the compiled code take longer to load than a few plain-Python calls take to run) looks into
    numba's cache, importing numba if no compiled function was needed before
-   (:func:`vjm_ros.core.jit.activate`); when the compiled code is there (the usual case) it is
+   (:func:`vjm_ros.jit.deferred.activate`); when the compiled code is there (the usual case) it is
    loaded and every call goes to it, as without this module;
 2. otherwise the entry point is handed to the compile server, a process of its own at a lower
-   priority, on the other core (:mod:`vjm_ros.core.compile_server`: one at a time on a machine,
+   priority, on the other core (:mod:`vjm_ros.jit.compile_server`: one at a time on a machine,
    detached from the run), and calls run the function's plain-Python copy (:func:`interpreted`:
    the same source with every compiled callee replaced by its own plain copy) until the server
    has written the compiled code into numba's cache; the next call then loads it from there and
@@ -35,8 +35,9 @@ import threading
 import time
 import types
 
-from vjm_ros.core import jit
-from vjm_ros.core.compile_server import server
+from vjm_ros.jit import deferred as jit
+from vjm_ros.jit import numba_internals
+from vjm_ros.jit.compile_server import server
 
 ENVIRONMENT = "VJM_TIERED"
 """Environment variable: ``0`` compiles in the calling process (no plain-Python tier)."""
@@ -99,7 +100,7 @@ def _plain_globals(names: dict) -> dict:
 def interpreted(function):
     """The plain-Python copy of a compiled function: its source, with every compiled function it
     reaches (through its module's globals, a module, or a copy made by
-    :func:`vjm_ros.core.jit.variant`) replaced by that function's plain copy. A function that is
+    :func:`vjm_ros.jit.variant`) replaced by that function's plain copy. A function that is
     not compiled (numba missing, ``NUMBA_DISABLE_JIT``) is returned as it is."""
     if not jit.is_compiled(function):
         return function
@@ -119,31 +120,13 @@ def interpreted(function):
 # ---------------------------------------------------------------------------- numba's cache
 def signature(dispatcher, args: tuple) -> tuple:
     """numba's argument types for a call with ``args`` (what the dispatcher itself computes)."""
-    dispatcher = jit.compiled(dispatcher)
-    return tuple(dispatcher.typeof_pyval(a) for a in args)
+    return numba_internals.argument_types(jit.compiled(dispatcher), args)
 
 
 def load_cached(dispatcher, args: tuple) -> bool:
     """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
     this process already, or loaded now from numba's cache (as numba's own first call does)."""
-    dispatcher = jit.compiled(dispatcher)
-    sig = signature(dispatcher, args)
-    if sig in dispatcher.overloads:
-        return True
-    cache = getattr(dispatcher, "_cache", None)
-    context = getattr(dispatcher, "targetctx", None)
-    if cache is None or context is None or not hasattr(dispatcher, "add_overload"):
-        return False
-    from numba.core.compiler_lock import global_compiler_lock
-
-    with global_compiler_lock:
-        result = cache.load_overload(sig, context)
-        if result is None:
-            return False
-        if not result.objectmode:
-            context.insert_user_function(result.entry_point, result.fndesc, [result.library])
-        dispatcher.add_overload(result)
-    return True
+    return numba_internals.load_cached(jit.compiled(dispatcher), args)
 
 
 # ---------------------------------------------------------------------------- entry points
@@ -185,7 +168,7 @@ class Tiered:
         return self._call(args)
 
     def _resolve(self) -> None:
-        """The dispatcher in place of the :class:`~vjm_ros.core.jit.Deferred` function (numba
+        """The dispatcher in place of the :class:`~vjm_ros.jit.deferred.Deferred` function (numba
         imported now if it was not)."""
         self.compiled = jit.compiled(self.compiled)
 

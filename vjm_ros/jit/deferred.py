@@ -3,30 +3,30 @@
 numba is imported when the first compiled function is needed, not when the package is: until
 then :func:`jit` and :func:`variant` give :class:`Deferred` functions, and :func:`activate`
 (run by the first call of one of them, or by the tiers' loading,
-:mod:`vjm_ros.core.tiers`) imports numba, makes every deferred function's dispatcher and puts
+:mod:`vjm_ros.jit.tiers`) imports numba, makes every deferred function's dispatcher and puts
 the dispatchers in the modules' places of the deferred functions. Importing numba and loading the
 kernels from its cache takes 0.3-0.4 s, more than half of a warm ``vjm run``; a run whose first
-ticks run as plain Python (:mod:`vjm_ros.core.tiers`) has its first tick without it, and a
+ticks run as plain Python (:mod:`vjm_ros.jit.tiers`) has its first tick without it, and a
 command that needs a few kernel evaluations only (a one-tick run, a scene's checks) never loads
 numba at all.
 
-numba keys each cached function on the source file that defines it, and does not notice when a
-function it calls from another file changes: a kernel in ``pipeline.py`` would keep running the
-old ``kernels.step`` after an edit of ``kernels.py``. So every function compiled here is keyed on
-the contents of all of the package's compiled sources (:data:`COMPILED_SOURCES`): any change to
-one of them recompiles them all.
+Every function compiled here is keyed in numba's cache on the contents of all of the package's
+compiled sources (:mod:`vjm_ros.jit.sources`), not on its own file only. What this needs of
+numba's private internals is in :mod:`vjm_ros.jit.numba_internals`, and only there.
 """
 
 from __future__ import annotations
 
 import functools
-import hashlib
 import importlib.machinery
 import importlib.util
 import sys
 import threading
 import types
 from pathlib import Path
+
+from vjm_ros.jit import numba_internals
+from vjm_ros.jit.sources import PACKAGE, sources_stamp
 
 
 def _load_blas_wrappers() -> bool:
@@ -72,106 +72,15 @@ HAVE_NUMBA = _numba_installed()
 """Whether numba is installed: compiled functions then run as machine code once it is imported
 (:func:`activate`); otherwise they are the plain functions."""
 
-_PACKAGE = Path(__file__).resolve().parents[1]
-
-UNCOMPILED_CORE = frozenset({"tiers.py", "compile_server.py"})
-"""Files of ``core/`` that decide where and when the compiled code is built, never what it is:
-an edit of them recompiles nothing."""
-
-COMPILED_SOURCES = tuple(sorted(
-    [*(p for p in (_PACKAGE / "core").glob("*.py") if p.name not in UNCOMPILED_CORE),
-     _PACKAGE / "control" / "compiled.py"]))
-"""Files whose contents key every compiled function's cache: all of ``core/`` (the kernels and
-what they are built from) but :data:`UNCOMPILED_CORE`, and the controllers' compiled algebra."""
-
-
-@functools.lru_cache(maxsize=1)
-def sources_stamp() -> bytes:
-    """SHA-256 over the contents of :data:`COMPILED_SOURCES` (read once per process)."""
-    digest = hashlib.sha256()
-    for path in COMPILED_SOURCES:
-        digest.update(path.name.encode())
-        digest.update(path.read_bytes())
-    return digest.digest()
-
-
-def _keyed_on_sources(base: type) -> type:
-    """A numba cache locator like ``base`` whose source stamp is :func:`sources_stamp`, for the
-    functions of this package only (others fall through to numba's own locators)."""
-
-    class Locator(base):
-        def get_source_stamp(self):
-            return sources_stamp()
-
-        @classmethod
-        def from_function(cls, py_func, py_file):
-            if not str(Path(py_file).resolve()).startswith(str(_PACKAGE)):
-                return None
-            return super().from_function(py_func, py_file)
-
-    Locator.__name__ = Locator.__qualname__ = f"VjmSources{base.__name__}"
-    return Locator
-
-
-def _install_locators() -> bool:
-    """Put the source-keyed locators first in numba's list; False where numba's caching layout
-    is not the one expected (numba's own per-file keys then apply)."""
-    try:
-        from numba.core import caching
-
-        bases = (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator,
-                 caching.UserWideCacheLocator)
-        impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
-        classes = impl._locator_classes
-    except (ImportError, AttributeError):  # pragma: no cover - another numba layout
-        return False
-    if not any(c.__name__.startswith("VjmSources") for c in classes):
-        classes[:0] = [_keyed_on_sources(b) for b in bases]
-    return True
-
-
 LOCATORS_INSTALLED = False
-"""Whether compiled functions are keyed on :func:`sources_stamp` (set by :func:`activate`)."""
-
-
-def _refcount_free_supported() -> bool:
-    """Whether this numba takes the ``_nrt`` option (compile without reference counting)."""
-    try:
-        from numba.core.cpu import CPUTargetOptions
-
-        return hasattr(CPUTargetOptions, "_nrt")
-    except ImportError:  # pragma: no cover - another numba layout
-        return False
-
+"""Whether compiled functions are keyed on :func:`~vjm_ros.jit.sources.sources_stamp` (set by
+:func:`activate`)."""
 
 REFCOUNT_FREE = False
 """Whether functions that create no arrays are compiled without numba's reference counting (set
 by :func:`activate`)."""
 
-
-def _load_without_registries(cache, sig, target_context):
-    """numba's ``Cache.load_overload`` without its refresh of ``target_context``.
-
-    numba refreshes the target context before it looks into a function's cache: that imports and
-    installs every typing and lowering registry it has (about 0.1 s, a fifth of a warm
-    ``vjm run``), which only compiling needs. Rebuilding a cached function needs its code and the
-    runtime, which is initialized here as the refresh would; on a miss numba compiles, and its
-    compiler refreshes the context itself.
-    """
-    from numba.core.runtime import rtsys
-
-    rtsys.initialize(target_context)
-    with cache._guard_against_spurious_io_errors():
-        return cache._load_overload(sig, target_context)
-
-
-def _loads_lazily(dispatcher) -> None:
-    """Make ``dispatcher``'s cache load with :func:`_load_without_registries` where numba's
-    cache has the layout it is written for (otherwise numba's own loading stays)."""
-    cache = getattr(dispatcher, "_cache", None)
-    if all(hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors",
-                                             "load_overload")):
-        cache.load_overload = functools.partial(_load_without_registries, cache)
+_REFCOUNT_FREE_OPTIONS: dict = {}
 
 
 # ---------------------------------------------------------------------------- deferred numba
@@ -209,10 +118,7 @@ _ACTIVATING = threading.RLock()
 
 def is_compiled(obj) -> bool:
     """Whether ``obj`` is a compiled function: a numba dispatcher or a :class:`Deferred`."""
-    if isinstance(obj, Deferred):
-        return True
-    dispatcher = sys.modules.get("numba.core.dispatcher")
-    return dispatcher is not None and isinstance(obj, dispatcher.Dispatcher)
+    return isinstance(obj, Deferred) or numba_internals.is_dispatcher(obj)
 
 
 def compiled(obj):
@@ -234,8 +140,8 @@ def _options(options: dict) -> dict:
     """numba's options for the project's (``allocates``, ``inline``)."""
     numba_options = {"cache": True, "nogil": True, "error_model": "numpy",
                      "inline": options["inline"]}
-    if not options["allocates"] and REFCOUNT_FREE:
-        numba_options["_nrt"] = False
+    if not options["allocates"]:
+        numba_options.update(_REFCOUNT_FREE_OPTIONS)
     return numba_options
 
 
@@ -246,7 +152,7 @@ def _make(fn, options: dict):
     from numba import njit
 
     dispatcher = njit(**_options(options))(fn)
-    _loads_lazily(dispatcher)
+    numba_internals.loads_lazily(dispatcher)
     dispatcher.vjm_options = options
     return dispatcher
 
@@ -264,7 +170,7 @@ def activate() -> bool:
     so that numba, typing a function, finds its compiled callees. Functions made after this are
     compiled functions at once. Returns :data:`HAVE_NUMBA`; where numba fails to import, the
     plain functions take the deferred ones' places."""
-    global _ACTIVE, HAVE_NUMBA, LOCATORS_INSTALLED, REFCOUNT_FREE
+    global _ACTIVE, HAVE_NUMBA, LOCATORS_INSTALLED, REFCOUNT_FREE, _REFCOUNT_FREE_OPTIONS
     with _ACTIVATING:
         if _ACTIVE:
             return HAVE_NUMBA
@@ -275,8 +181,9 @@ def activate() -> bool:
             except ImportError:  # pragma: no cover - installed but broken
                 HAVE_NUMBA = False
         if HAVE_NUMBA:
-            LOCATORS_INSTALLED = _install_locators()
-            REFCOUNT_FREE = _refcount_free_supported()
+            LOCATORS_INSTALLED = numba_internals.install_locators(sources_stamp, PACKAGE)
+            _REFCOUNT_FREE_OPTIONS = numba_internals.refcount_free_options()
+            REFCOUNT_FREE = bool(_REFCOUNT_FREE_OPTIONS)
         for deferred in _DEFERRED:
             deferred.dispatcher = _make(deferred.py_func, deferred.vjm_options)
         spaces = {id(d.py_func.__globals__): d.py_func.__globals__ for d in _DEFERRED}
