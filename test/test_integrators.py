@@ -11,6 +11,7 @@ import chains as ch
 import numpy as np
 import pytest
 from oracle.fixed import INTEGRATORS as ORACLE_STEPS
+from oracle.fixed import ButcherTableau
 from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import fuse_integrator, make_mechanism
@@ -112,6 +113,20 @@ def test_observed_order(reference, name, steps, lo, hi):
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert np.all((orders >= lo) & (orders <= hi)), (errs, orders)
     assert make_integrator(name).order == round(float(np.mean(orders)))
+
+
+def test_oracle_rk4_tableau_meets_the_order_conditions():
+    """Oracle check: the tableau that drives the oracle's RK4 (the reference above and
+    ``test/test_fast.py``'s steps) meets Butcher's eight conditions of order 4, and a tableau
+    whose rows of ``A`` do not sum to its nodes ``c`` is refused."""
+    got = ORACLE_STEPS["rk4"].tableau.order_conditions()
+    want = {"b": 1, "bc": 1 / 2, "bc2": 1 / 3, "bAc": 1 / 6,
+            "bc3": 1 / 4, "bcAc": 1 / 8, "bAc2": 1 / 12, "bAAc": 1 / 24}
+    for key, value in want.items():
+        # sums of four products of binary fractions and thirds: a few eps
+        assert got[key] == pytest.approx(value, rel=1e-15), key
+    with pytest.raises(ValueError, match="row sums"):
+        ButcherTableau([[0.0, 0.0], [0.4, 0.0]], [0.5, 0.5], [0.0, 0.5])
 
 
 # --------------------------------------------------------------------------- stability bounds
