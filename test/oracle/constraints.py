@@ -1,203 +1,197 @@
-"""Oracle: loop closures in numpy, residuals ``C(q)``, Jacobians ``A = dC/dq`` and their enforcement.
+"""Oracle: loop closures, their rows ``C(q)``, ``A = dC/dq``, ``Adot qd``, and their enforcement.
 
-An independent formulation of the closure rows of :mod:`vjm_ros.core.kernels` (docs/design.md
-section 2), written with whole-array numpy operations:
+Rows (docs/design.md section 2) from the positions, joint columns and bias accelerations of the
+closure points (:mod:`oracle.kinematics`), closure by closure:
 
-* ``hinge``: ``C = Pa - Pb`` (2 rows, m);
-* ``slider``: ``C = (Pa - P0) . n_d`` with ``n_d = e_z x d`` the line normal (1 row, m); the line
-  may be carried by a link, then ``d`` and ``P0`` turn with it;
-* ``angle``: ``C = wrap(theta_a - theta_b - offset)`` (1 row, rad).
+* ``hinge``: ``C = Pa - Pb``, ``A = J_a - J_b``, ``Adot qd = a_a - a_b`` (2 rows, m);
+* ``slider``: ``C = r . n_d`` with ``r = Pa - Pb`` and ``n_d = e_z x d`` the normal of the line,
+  which turns with the link that carries it (``d' = omega_b n_d``, ``n_d' = -omega_b d``):
+  ``A = n_d . (J_a - J_b) - (r . d) Jw_b`` and, differentiating twice at ``qdd = 0``,
+  ``Adot qd = n_d . (a_a - a_b) - 2 omega_b (v_a - v_b) . d - omega_b^2 r . n_d`` (1 row, m);
+* ``angle``: ``C = wrap(theta_a - theta_b - offset)``, ``A = Jw_a - Jw_b``, ``Adot qd = 0``
+  (1 row, rad);
 
-For every row this module also gives ``Cdot = A qd`` and the velocity-product term ``Adot qd``.
-Enforcement (the settings classes :class:`~vjm_ros.core.constraints.PenaltyClosure` and
+and ``Cdot = A qd`` for every row. Enforcement (the settings classes
+:class:`~vjm_ros.core.constraints.PenaltyClosure` and
 :class:`~vjm_ros.core.constraints.ExactClosure` stay in the package; the formulas are here):
 
-* penalty: force ``F = -(Kp C + Kv Cdot)`` per row, generalized force ``A^T F``;
-* exact: multipliers from ``A M^-1 A^T lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)``,
-  solved by a truncated eigen-decomposition (LAPACK ``dsyevd``) for the minimum-norm multipliers.
+* penalty: ``F = -(Kp C + Kv Cdot)`` per row, generalized force ``A^T F``;
+* exact: ``G lambda = -(A M^-1 Q + Adot qd + 2 alpha Cdot + beta^2 C)``, ``G = A M^-1 A^T``, solved
+  through the singular values of the whitened Jacobian ``B = A L^-T`` (``M = L L^T``,
+  ``G = B B^T``): the minimum-norm multipliers, the singular values with
+  ``s^2 <= rcond * s_max^2`` (the eigenvalues of ``G`` below ``rcond`` of the largest) dropped.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
 import numpy as np
 
-from oracle.kinematics import Kinematics, angular_jacobian, point_jacobians, point_motion
+from oracle.dynamics import MassFactor
+from oracle.kinematics import Kinematics
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
-from vjm_ros.core.model import ANGLE, GROUND, HINGE, SLIDER, Model
+from vjm_ros.core.model import ANGLE, HINGE, SLIDER, Model
 
 
-@dataclass
+class _Point:
+    """Position, velocity, bias acceleration and Jacobian of one closure point."""
+
+    def __init__(self, kin: Kinematics, ref):
+        self.p = kin.position(ref.link, ref.local)
+        self.jac = kin.jacobian(ref.link, self.p)
+        self.v = self.jac @ kin.qd
+        self.a = kin.bias_acceleration(ref.link, self.p, self.v)
+
+
 class ClosureTerms:
-    """Closure rows at one state.
-
-    Attributes
-    ----------
-    residual : ndarray, shape (r,)
-        ``C``, m or rad.
-    rate : ndarray, shape (r,)
-        ``Cdot = A qd``.
-    jacobian : ndarray, shape (r, n)
-        ``A``.
-    bias : ndarray, shape (r,)
-        ``Adot qd``.
-    row_direction : ndarray, shape (r, 3)
-        World-frame force (``Fx, Fy, Mz``) produced by a unit multiplier on each row.
-    points : ndarray, shape (k, 2)
-        Application point ``Pa`` of each closure, m.
-    """
-
-    residual: np.ndarray
-    rate: np.ndarray
-    jacobian: np.ndarray
-    bias: np.ndarray
-    row_direction: np.ndarray
-    points: np.ndarray
-
-
-class ClosureSet:
-    """Evaluates all closures of a model together.
+    """The closure rows of a model at one state, in scene order.
 
     Parameters
     ----------
     model : Model
+    kin : Kinematics
+        With rates.
+    jacobian : bool
+        False: only ``residual``, ``row_direction`` and ``points`` (the rest stays zero).
+
+    Attributes
+    ----------
+    residual, rate, bias : ndarray, shape (r,)
+        Per row ``C`` (m or rad), ``Cdot = A qd`` and ``Adot qd``.
+    jacobian : ndarray, shape (r, n)
+        ``A = dC/dq``.
+    row_direction : ndarray, shape (r, 3)
+        ``(Fx, Fy, Mz)`` in the world frame that a unit row force puts on ``Pa``.
+    points : ndarray, shape (k, 2)
+        ``Pa`` of each closure, m.
+    """
+
+    def __init__(self, model: Model, kin: Kinematics, jacobian: bool = True):
+        rows, n = model.n_rows, model.n
+        self.residual = np.zeros(rows)
+        self.jacobian = np.zeros((rows, n))
+        self.bias = np.zeros(rows)
+        self.row_direction = np.zeros((rows, 3))
+        self.points = np.zeros((len(model.closures), 2))
+        row = 0
+        for k, closure in enumerate(model.closures):
+            if closure.kind == HINGE:
+                self._hinge(kin, closure, row)
+            elif closure.kind == SLIDER:
+                self._slider(kin, closure, row)
+            elif closure.kind == ANGLE:
+                self._angle(kin, closure, row)
+            self.points[k] = kin.position(closure.point.link, closure.point.local)
+            row += closure.rows
+        if not jacobian:
+            self.jacobian[:] = 0.0
+            self.bias[:] = 0.0
+        self.rate = self.jacobian @ kin.qd
+
+    def _hinge(self, kin: Kinematics, closure, row: int) -> None:
+        a, b = _Point(kin, closure.point), _Point(kin, closure.target)
+        self.residual[row : row + 2] = a.p - b.p
+        self.jacobian[row : row + 2] = a.jac - b.jac
+        self.bias[row : row + 2] = a.a - b.a
+        self.row_direction[row, 0] = self.row_direction[row + 1, 1] = 1.0
+
+    def _slider(self, kin: Kinematics, closure, row: int) -> None:
+        a, b = _Point(kin, closure.point), _Point(kin, closure.target)
+        carrier = closure.target.link
+        d = kin.rotation[carrier] @ np.asarray(closure.direction, dtype=float)
+        normal = np.array((-d[1], d[0]))
+        w = kin.omega[carrier]
+        r, dv = a.p - b.p, a.v - b.v
+        self.residual[row] = r @ normal
+        self.jacobian[row] = normal @ (a.jac - b.jac) - (r @ d) * kin.angle_jacobian(carrier)
+        self.bias[row] = normal @ (a.a - b.a) - 2.0 * w * (dv @ d) - w * w * (r @ normal)
+        self.row_direction[row, :2] = normal
+
+    def _angle(self, kin: Kinematics, closure, row: int) -> None:
+        first, second = closure.point.link, closure.target.link
+        gap = kin.theta[first] - kin.theta[second] - closure.offset
+        wrapped = math.remainder(gap, 2.0 * math.pi)  # exact, in [-pi, pi]
+        self.residual[row] = -math.pi if wrapped == math.pi else wrapped  # [-pi, pi)
+        self.jacobian[row] = kin.angle_jacobian(first) - kin.angle_jacobian(second)
+        self.row_direction[row, 2] = 1.0
+
+
+class ClosureSet:
+    """The closures of a model: their rows and per-closure sums.
+
+    Attributes
+    ----------
+    model : Model
+    closures : tuple of Closure
+        In scene order, ``n_rows`` rows in all.
+    row_closure : ndarray of int, shape (r,)
+        Index of the closure each row belongs to.
     """
 
     def __init__(self, model: Model):
         self.model = model
         self.closures = model.closures
         self.n_rows = model.n_rows
-        self.row_closure = np.array(
-            [k for k, c in enumerate(self.closures) for _ in range(c.rows)], dtype=int
-        )
-        links, local = [], []
-        for c in self.closures:
-            links += [c.point.link, c.target.link]
-            local += [c.point.local, c.target.local]
-        self._links = np.array(links, dtype=int).reshape(-1)
-        self._local = np.array(local, dtype=float).reshape(-1, 2)
-
-    def row_slices(self) -> list[slice]:
-        """Row range of each closure in the stacked residual."""
-        out, start = [], 0
-        for c in self.closures:
-            out.append(slice(start, start + c.rows))
-            start += c.rows
-        return out
+        owner = []
+        for k, closure in enumerate(self.closures):
+            owner += [k] * closure.rows
+        self.row_closure = np.array(owner, dtype=int)
 
     def evaluate(self, kin: Kinematics, jacobian: bool = True) -> ClosureTerms:
-        """Residuals, rates, Jacobian and bias terms of every closure.
-
-        Parameters
-        ----------
-        kin : Kinematics
-            From :func:`oracle.kinematics.forward_kinematics` with rates.
-        jacobian : bool
-            Skip ``A`` and ``Adot qd`` when False (they are then zero arrays).
-
-        Returns
-        -------
-        ClosureTerms
-        """
-        model = self.model
-        r, n = self.n_rows, model.n
-        res = np.zeros(r)
-        rate = np.zeros(r)
-        jac = np.zeros((r, n))
-        bias = np.zeros(r)
-        direction = np.zeros((r, 3))
-        k = len(self.closures)
-        points = np.zeros((k, 2))
-        if k == 0:
-            return ClosureTerms(res, rate, jac, bias, direction, points)
-        p, v, a = point_motion(kin, self._links, self._local)
-        jp = point_jacobians(model, kin, self._links, p) if jacobian else None
-        row = 0
-        for i, c in enumerate(self.closures):
-            ia, ib = 2 * i, 2 * i + 1
-            points[i] = p[ia]
-            if c.kind == HINGE:
-                res[row : row + 2] = p[ia] - p[ib]
-                rate[row : row + 2] = v[ia] - v[ib]
-                direction[row, 0] = 1.0
-                direction[row + 1, 1] = 1.0
-                if jacobian:
-                    jac[row : row + 2] = jp[ia] - jp[ib]
-                    bias[row : row + 2] = a[ia] - a[ib]
-                row += 2
-            elif c.kind == SLIDER:
-                lk = c.target.link
-                rot = kin.rotation[lk]
-                d = rot @ np.asarray(c.direction)
-                nd = np.array((-d[1], d[0]))
-                w = kin.omega[lk]
-                dp, dv = p[ia] - p[ib], v[ia] - v[ib]
-                res[row] = dp @ nd
-                rate[row] = dv @ nd - w * (dp @ d)
-                direction[row, :2] = nd
-                if jacobian:
-                    jrow = nd @ (jp[ia] - jp[ib])
-                    if lk != GROUND:
-                        jrow = jrow - (dp @ d) * angular_jacobian(model, np.array([lk]))[0]
-                    jac[row] = jrow
-                    bias[row] = (a[ia] - a[ib]) @ nd - 2.0 * w * (dv @ d) - w * w * (dp @ nd)
-                row += 1
-            elif c.kind == ANGLE:
-                la, lb = c.point.link, c.target.link
-                diff = kin.theta[la] - kin.theta[lb] - c.offset
-                res[row] = (diff + np.pi) % (2.0 * np.pi) - np.pi
-                rate[row] = kin.omega[la] - kin.omega[lb]
-                direction[row, 2] = 1.0
-                if jacobian:
-                    jw = angular_jacobian(model, np.array([la, lb]))
-                    jac[row] = jw[0] - jw[1]
-                row += 1
-        return ClosureTerms(res, rate, jac, bias, direction, points)
+        """:class:`ClosureTerms` at the state of ``kin`` (``jacobian``: see there)."""
+        return ClosureTerms(self.model, kin, jacobian)
 
     def errors(self, terms: ClosureTerms) -> np.ndarray:
-        """Size of each closure's residual (norm over its rows).
-
-        Returns
-        -------
-        ndarray, shape (k,)
-            m for hinge and slider, rad for angle.
-        """
-        sq = np.zeros(len(self.closures))
-        np.add.at(sq, self.row_closure, terms.residual**2)
-        return np.sqrt(sq)
+        """``|C|`` of each closure over its rows, shape (k,): m (hinge, slider) or rad (angle)."""
+        return np.array([np.linalg.norm(terms.residual[self.row_closure == k])
+                         for k in range(len(self.closures))])
 
     def closure_forces(self, terms: ClosureTerms, row_force: np.ndarray) -> np.ndarray:
-        """World-frame force of each closure from per-row forces.
-
-        Parameters
-        ----------
-        terms : ClosureTerms
-        row_force : ndarray, shape (r,)
-
-        Returns
-        -------
-        ndarray, shape (k, 3)
-            ``(Fx, Fy, Mz)`` acting on ``Pa``: N, N, N m.
-        """
+        """World-frame force ``(Fx, Fy, Mz)`` on each ``Pa`` (N, N, N m), shape (k, 3), from the
+        row forces (shape (r,))."""
         out = np.zeros((len(self.closures), 3))
-        np.add.at(out, self.row_closure, terms.row_direction * row_force[:, None])
+        for k in range(len(self.closures)):
+            mine = self.row_closure == k
+            out[k] = row_force[mine] @ terms.row_direction[mine]
         return out
 
 
 def penalty_row_forces(method: PenaltyClosure, terms: ClosureTerms) -> np.ndarray:
     """Per-row penalty force ``F = -(Kp C + Kv Cdot)``, N or N m."""
-    return -(method.kp * terms.residual + method.kv * terms.rate)
+    return -(np.asarray(method.kp) * terms.residual + np.asarray(method.kv) * terms.rate)
 
 
-def penalty_energy(method: PenaltyClosure, terms: ClosureTerms) -> float:
-    """Energy stored in the penalty springs ``sum 1/2 Kp C^2``, J."""
-    return 0.5 * float(np.sum(method.kp * terms.residual**2))
+class WhitenedClosures:
+    """``M = L L^T`` and the singular values of ``B = A L^-T`` (``G = A M^-1 A^T = B B^T``).
 
+    Parameters
+    ----------
+    mass_matrix : ndarray, shape (n, n)
+    jacobian : ndarray, shape (r, n)
+    rcond : float
+        Directions of ``G`` with eigenvalue ``s^2 <= rcond * s_max^2`` get no multiplier.
+    """
 
-def penalty_dissipation(method: PenaltyClosure, terms: ClosureTerms) -> float:
-    """Power drawn by the penalty dampers ``sum Kv Cdot^2``, W."""
-    return float(np.sum(method.kv * terms.rate**2))
+    def __init__(self, mass_matrix: np.ndarray, jacobian: np.ndarray, rcond: float = 1e-10):
+        self.mass = MassFactor(mass_matrix)
+        self.whitened_t = self.mass.half_solve(jacobian.T)  # B^T = L^-1 A^T, shape (n, r)
+        u, s, vt = np.linalg.svd(self.whitened_t.T, full_matrices=False)
+        keep = s * s > rcond * max(float(s.max(initial=0.0)) ** 2, 1e-300)
+        self.u, self.s, self.vt = u[:, keep], s[keep], vt[keep]
+
+    def solve_multipliers(self, rhs: np.ndarray) -> np.ndarray:
+        """Minimum-norm ``lambda`` of ``G lambda = rhs``: ``U S^-2 U^T rhs``."""
+        return self.u @ ((self.u.T @ rhs) / self.s**2)
+
+    def spread(self, lam: np.ndarray) -> np.ndarray:
+        """``M^-1 A^T lambda`` (the motion a row force gives): ``L^-T B^T lambda``."""
+        return self.mass.half_solve_transposed(self.whitened_t @ lam)
+
+    def least_change(self, c: np.ndarray) -> np.ndarray:
+        """The ``M``-metric least ``dq`` with ``A dq = c`` (the least-squares one where ``c`` is
+        not in the range of ``A``): ``L^-T B^+ c``."""
+        return self.mass.half_solve_transposed(self.vt.T @ ((self.u.T @ c) / self.s))
 
 
 def exact_accelerations(
@@ -217,77 +211,13 @@ def exact_accelerations(
     -------
     qdd : ndarray, shape (n,)
     lam : ndarray, shape (r,)
-        Row multipliers (the closure force per row, N or N m): ``M qdd = Q + A^T lam``.
+        Row multipliers (N or N m): ``M qdd = Q + A^T lam`` and
+        ``A qdd + Adot qd = -(2 alpha Cdot + beta^2 C)`` where ``G`` is regular.
     """
-    a = terms.jacobian
-    if a.shape[0] == 0:
-        return np.linalg.solve(mass_matrix, force), np.zeros(0)
-    x = np.linalg.solve(mass_matrix, np.column_stack((force, a.T)))
-    minv_q, minv_at = x[:, 0], x[:, 1:]
-    g = a @ minv_at
-    rhs = -(
-        a @ minv_q + terms.bias + 2.0 * method.alpha * terms.rate + method.beta**2 * terms.residual
-    )
-    lam = solve_multipliers(g, rhs, method.rcond)
-    return minv_q + minv_at @ lam, lam
-
-
-def closure_mobility(mass_matrix: np.ndarray, jacobian: np.ndarray) -> np.ndarray:
-    """``G = A M^-1 A^T``: closure-row accelerations per unit row force.
-
-    ``Cddot = G F + (terms without F)`` for row forces ``F``; symmetric positive semi-definite,
-    rank-deficient when ``A`` loses rank (a singular pose, redundant closures).
-
-    Parameters
-    ----------
-    mass_matrix : ndarray, shape (n, n)
-    jacobian : ndarray, shape (r, n)
-
-    Returns
-    -------
-    ndarray, shape (r, r)
-        1/kg for translation rows (1/(kg m^2) for angle rows, mixed entries between them).
-    """
-    g = jacobian @ np.linalg.solve(mass_matrix, jacobian.T)
-    return 0.5 * (g + g.T)
-
-
-def solve_multipliers(g: np.ndarray, rhs: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
-    """Minimum-norm solution of ``G lambda = rhs`` for symmetric positive semi-definite ``G``.
-
-    Eigenvalues below ``rcond * max eigenvalue`` are treated as zero, so directions that the
-    closures do not constrain independently (rank loss of ``A``) receive no multiplier.
-
-    Parameters
-    ----------
-    g : ndarray, shape (r, r)
-    rhs : ndarray, shape (r,)
-    rcond : float
-
-    Returns
-    -------
-    ndarray, shape (r,)
-    """
-    if g.shape[0] == 0:
-        return np.zeros(0)
-    w, v = np.linalg.eigh(g)
-    keep = w > rcond * max(float(w[-1]), 1e-300)
-    inv = np.zeros_like(w)
-    inv[keep] = 1.0 / w[keep]
-    return v @ (inv * (v.T @ rhs))
-
-
-def project_velocity(
-    mass_matrix: np.ndarray, jacobian: np.ndarray, qd: np.ndarray, rcond: float = 1e-10
-) -> np.ndarray:
-    """Remove the part of ``qd`` that violates ``A qd = 0`` (kinetic-energy metric).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-    """
-    if jacobian.shape[0] == 0:
-        return qd
-    minv_at = np.linalg.solve(mass_matrix, jacobian.T)
-    g = jacobian @ minv_at
-    return qd - minv_at @ solve_multipliers(g, jacobian @ qd, rcond)
+    if terms.jacobian.shape[0] == 0:
+        return MassFactor(mass_matrix).solve(force), np.zeros(0)
+    solve = WhitenedClosures(mass_matrix, terms.jacobian, method.rcond)
+    free = solve.mass.solve(force)
+    feedback = 2.0 * method.alpha * terms.rate + method.beta**2 * terms.residual
+    lam = solve.solve_multipliers(-(terms.jacobian @ free + terms.bias + feedback))
+    return free + solve.spread(lam), lam

@@ -1,48 +1,54 @@
-"""Oracle: the closed mechanism in numpy, open-chain dynamics plus the chosen closure method.
+"""Oracle: the closed mechanism, open-chain dynamics plus the chosen closure method.
 
-The same interface as the package's compiled :class:`vjm_ros.core.mechanism.Mechanism`
-(``evaluate``, ``accelerations``, ``implicit_penalty_velocity``, ``energies``,
-``closure_jacobian``, ``project``), assembled from :mod:`oracle.dynamics` and
-:mod:`oracle.constraints` with LAPACK solves, so that the kernels can be checked against it.
+What the package's compiled :class:`vjm_ros.core.mechanism.Mechanism` offers (``evaluate``,
+``accelerations``, ``implicit_penalty_velocity``, ``energies``, ``closure_jacobian``,
+``project``), assembled from :mod:`oracle.dynamics` (Newton-Euler), :mod:`oracle.constraints`
+(closure rows, multipliers through the whitened Jacobian) and :mod:`oracle.fixed` (the step
+implicit in the penalty forces), so that the kernels can be checked against it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from oracle.constraints import (
-    ClosureSet,
-    ClosureTerms,
-    exact_accelerations,
-    penalty_energy,
-    penalty_row_forces,
-    project_velocity,
-    solve_multipliers,
-)
-from oracle.dynamics import DynamicsTerms, dynamics_terms, energy_from_terms
+from oracle.constraints import ClosureSet, WhitenedClosures, exact_accelerations, penalty_row_forces
+from oracle.dynamics import DynamicsTerms, MassFactor
+from oracle.fixed import backward_euler_penalty_velocity
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.model import Model
 
 
-@dataclass
 class Evaluation:
-    """Every derived quantity at one state and effort.
+    """The state's dynamics and closure rows, and the closure forces and accelerations they give.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    q, qd : ndarray, shape (n,)
+    tau : ndarray, shape (n,)
+        Generalized efforts, N m or N.
 
     Attributes
     ----------
-    qdd : ndarray, shape (n,)
     dyn : DynamicsTerms
     closure : ClosureTerms
     row_force : ndarray, shape (r,)
         Closure force per row (penalty force or multiplier), N or N m.
+    qdd : ndarray, shape (n,)
     """
 
-    qdd: np.ndarray
-    dyn: DynamicsTerms
-    closure: ClosureTerms
-    row_force: np.ndarray
+    def __init__(self, mechanism: Mechanism, q: np.ndarray, qd: np.ndarray, tau: np.ndarray):
+        self.dyn = DynamicsTerms(mechanism.model, q, qd)
+        self.closure = mechanism.closures.evaluate(self.dyn.kin)
+        free = np.asarray(tau, dtype=float) - self.dyn.bias
+        method = mechanism.method
+        if isinstance(method, PenaltyClosure):
+            self.row_force = penalty_row_forces(method, self.closure)
+            self.qdd = MassFactor(self.dyn.mass_matrix).solve(
+                free + self.closure.jacobian.T @ self.row_force)
+        else:
+            self.qdd, self.row_force = exact_accelerations(
+                method, self.dyn.mass_matrix, free, self.closure)
 
 
 class Mechanism:
@@ -52,6 +58,12 @@ class Mechanism:
     ----------
     model : Model
     method : PenaltyClosure or ExactClosure
+
+    Attributes
+    ----------
+    evaluations : int
+        Right-hand sides evaluated (``evaluate``, ``accelerations``,
+        ``implicit_penalty_velocity``), counted as the package's mechanism counts them.
     """
 
     def __init__(self, model: Model, method: PenaltyClosure | ExactClosure):
@@ -67,75 +79,46 @@ class Mechanism:
         return isinstance(self.method, PenaltyClosure)
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
-        """Accelerations and closure forces.
-
-        Parameters
-        ----------
-        q, qd : ndarray, shape (n,)
-        tau : ndarray, shape (n,)
-            Generalized efforts, N m or N.
-
-        Returns
-        -------
-        Evaluation
-        """
+        """:class:`Evaluation` at ``(q, qd)`` under ``tau``."""
         self.evaluations += 1
-        dyn = dynamics_terms(self.model, q, qd)
-        ct = self.closures.evaluate(dyn.kin)
-        force = tau - dyn.bias
-        if isinstance(self.method, PenaltyClosure):
-            rf = penalty_row_forces(self.method, ct)
-            qdd = np.linalg.solve(dyn.mass_matrix, force + ct.jacobian.T @ rf)
-        else:
-            qdd, rf = exact_accelerations(self.method, dyn.mass_matrix, force, ct)
-        return Evaluation(qdd, dyn, ct, rf)
+        return Evaluation(self, q, qd, tau)
 
     def accelerations(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """``qdd`` only (what explicit integrators need)."""
+        """``qdd``, shape (n,) (rad/s^2 or m/s^2)."""
         return self.evaluate(q, qd, tau).qdd
 
     def implicit_penalty_velocity(
         self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float
     ) -> np.ndarray:
-        """Velocity after one step that is implicit in the penalty forces.
-
-        Solves ``M (v+ - v) = h (Q + A^T F+)`` with the penalty force linearized at the end of the
-        step, ``F+ = -(Kp (C + h A v+) + Kv A v+)``:
-        ``(M + h A^T (h Kp + Kv) A) dv = h (Q + A^T (F - h Kp A v))``.
-        With exact closures this is the explicit (semi-implicit Euler) velocity update.
-
-        Returns
-        -------
-        ndarray, shape (n,)
-        """
+        """Velocity after one step of length ``h`` (s) backward-Euler in the penalty forces
+        (:func:`oracle.fixed.backward_euler_penalty_velocity`); with exact closures
+        ``qd + h qdd``."""
         ev = self.evaluate(q, qd, tau)
-        if not isinstance(self.method, PenaltyClosure):
+        if not self.is_penalty:
             return qd + h * ev.qdd
-        a = ev.closure.jacobian
-        kp, kv = self.method.kp, self.method.kv
-        lhs = ev.dyn.mass_matrix + h * (a.T * (h * kp + kv)) @ a
-        rhs = h * (tau - ev.dyn.bias + a.T @ (ev.row_force - h * kp * (a @ qd)))
-        return qd + np.linalg.solve(lhs, rhs)
+        return backward_euler_penalty_velocity(
+            ev.dyn.mass_matrix, np.asarray(tau, dtype=float) - ev.dyn.bias, ev.closure.jacobian,
+            ev.closure.residual, self.method.kp, self.method.kv, qd, h)
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
-        """Kinetic, potential, constraint and total energy, J.
-
-        Returns
-        -------
-        ndarray, shape (4,)
-        """
-        kinetic, potential = energy_from_terms(self.model, ev.dyn, qd)
-        constraint = penalty_energy(self.method, ev.closure) if self.is_penalty else 0.0
-        return np.array([kinetic, potential, constraint, kinetic + potential + constraint])
+        """Kinetic, gravitational, penalty-spring (``sum 1/2 Kp C^2``) and total energy, J,
+        shape (4,) (``qd``: the evaluated state's, kept for the package's signature)."""
+        kinetic, potential = ev.dyn.energies()
+        spring = 0.0
+        if self.is_penalty:
+            spring = 0.5 * float(np.asarray(self.method.kp) @ ev.closure.residual**2)
+        return np.array([kinetic, potential, spring, kinetic + potential + spring])
 
     def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
-        """The closure Jacobian ``A(q)``, shape (r, n)."""
-        return self.closures.evaluate(dynamics_terms(self.model, q, np.zeros(self.n)).kin).jacobian
+        """``A(q)``, shape (r, n)."""
+        return self.closures.evaluate(DynamicsTerms(self.model, q, np.zeros(self.n)).kin).jacobian
 
     def project(
         self, q: np.ndarray, qd: np.ndarray, tol: float = 1e-12, iterations: int = 8
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Move ``q`` onto ``C(q) = 0`` and ``qd`` onto ``A qd = 0`` (mass-weighted least change).
+        """Move ``q`` onto ``C(q) = 0`` and ``qd`` onto ``A qd = 0``, each by the least change in
+        the metric of ``M``: at most ``iterations`` Gauss-Newton steps until ``max |C| <= tol``,
+        then one velocity projection (``rcond = 1e-10``).
 
         Returns
         -------
@@ -143,19 +126,12 @@ class Mechanism:
         """
         if self.closures.n_rows == 0:
             return q, qd
-        q = q.copy()
-        for _ in range(iterations):
-            dyn = dynamics_terms(self.model, q, np.zeros(self.n))
-            ct = self.closures.evaluate(dyn.kin)
-            if np.max(np.abs(ct.residual)) <= tol:
-                break
-            q = q - _weighted_min_norm(dyn.mass_matrix, ct.jacobian, ct.residual)
-        dyn = dynamics_terms(self.model, q, np.zeros(self.n))
-        ct = self.closures.evaluate(dyn.kin)
-        return q, project_velocity(dyn.mass_matrix, ct.jacobian, qd)
-
-
-def _weighted_min_norm(mass_matrix: np.ndarray, a: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``M^-1 A^T (A M^-1 A^T)^+ c``: the M-metric least change ``dq`` with ``A dq = c``."""
-    minv_at = np.linalg.solve(mass_matrix, a.T)
-    return minv_at @ solve_multipliers(a @ minv_at, c)
+        q = np.array(q, dtype=float)
+        for done in range(iterations + 1):
+            dyn = DynamicsTerms(self.model, q, np.zeros(self.n))
+            rows = self.closures.evaluate(dyn.kin)
+            metric = WhitenedClosures(dyn.mass_matrix, rows.jacobian)
+            if done == iterations or np.max(np.abs(rows.residual)) <= tol:
+                return q, qd - metric.least_change(rows.jacobian @ qd)
+            q = q - metric.least_change(rows.residual)
+        raise AssertionError("unreachable")
