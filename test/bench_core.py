@@ -10,7 +10,8 @@ Operations:
 
 * ``accelerations``: one ``accelerations(q, qd, tau)`` call;
 * ``rk4_tick``: one 1 kHz control tick of RK4 (four evaluations), through the integrator's
-  ``advance`` as the simulator calls it (the kernel side uses the fused integrator);
+  ``advance`` as the simulator calls it (the kernel side uses the fused integrator, the numpy
+  side the oracle's own RK4 steps: the package's integrators run only in the kernel);
 * ``simulator_tick``: one ``Simulator.advance()`` (the tick plus the divergence guard). Case
   ``numba_guard`` also reads the guard's closure errors from the kernel
   (:meth:`vjm_ros.core.mechanism.Mechanism.closure_errors`), as the simulator would with a fast
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracle.fixed import RK4 as OracleRK4
 from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import HAVE_NUMBA, fuse_integrator
@@ -71,7 +73,10 @@ def test_accelerations(benchmark, scene, closure, kernel):
 def test_rk4_tick(benchmark, scene, closure, kernel):
     """One RK4 step of 1 ms through ``Integrator.advance``."""
     mech, q, qd, tau = _setup(scene, closure, kernel)
-    integrator = fuse_integrator(make_integrator("rk4"), mech)
+    if kernel == "numba":
+        integrator = fuse_integrator(make_integrator("rk4"), mech)
+    else:
+        integrator = OracleRK4()
     benchmark.group = f"rk4_tick {scene} {closure}"
     q1, qd1 = benchmark(integrator.advance, mech, 0.0, q, qd, tau, 1e-3, 1)
     assert np.all(np.isfinite(q1)) and np.all(np.isfinite(qd1))
