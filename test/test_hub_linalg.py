@@ -52,10 +52,9 @@ def _pair(model, method):
     and with the dense solves."""
     blocks = chain_blocks(model)
     hub, dense = Mechanism(model, method), Mechanism(model, method)
-    hub._work = kernels.workspace(model.n, model.n_rows, blocks,
-                                  closure_layout(model, blocks, min_groups=1))
-    dense._work = kernels.workspace(model.n, model.n_rows, blocks)
-    assert hub._work[-1][model.n_rows, 0] >= 0
+    hub._data = kernels.make_data(hub.packed, closure_layout(model, blocks, min_groups=1))
+    dense._data = kernels.make_data(dense.packed)
+    assert hub._data.layout[model.n_rows, 0] >= 0
     # the compiled copies that hold the hub solves (the plain ones solve densely)
     hub._step, hub._advance_ticks = kernels.step_with_hub, pipeline.advance_ticks_with_hub
     dense._step, dense._advance_ticks = kernels.step, pipeline.advance_ticks
@@ -77,15 +76,16 @@ def test_a_mechanism_takes_the_copy_with_the_hub_solves_only_with_a_hub_layout()
 def _hub_taken(model, q, rcond=1e-10):
     """Whether :func:`hub_linalg.hub_correction` solves at ``q`` (True) or refuses (False)."""
     dyn, closure = Mechanism.reader(model).terms(q)
-    blocks = chain_blocks(model)
+    packed = Mechanism.reader(model).packed
+    blocks = packed.blocks
     n, r = model.n, model.n_rows
-    work = kernels.workspace(n, r, blocks, closure_layout(model, blocks, min_groups=1))
-    lu, piv, minv_at, g, v, vec = work[:6]
+    data = kernels.make_data(packed, closure_layout(model, blocks, min_groups=1))
+    lu, piv, minv_at, g, v, vec = data.lu, data.piv, data.minv_at, data.g, data.v, data.vec
     lu[:] = dyn.mass_matrix
     assert small_linalg.lu_factor_blocks(lu, piv, blocks) == 0
     c = np.linspace(-1.0, 1.0, r)
     return hub_linalg.hub_correction(lu, piv, np.ascontiguousarray(closure.jacobian), c, rcond,
-                                     np.empty(n), minv_at, g, v, vec, blocks, work[-1])
+                                     np.empty(n), minv_at, g, v, vec, blocks, data.layout)
 
 
 def _kappa_exact(model, q):
@@ -209,7 +209,7 @@ from vjm_ros.studies.bench.scaling import star_scene
 sc = star_scene(6)
 for integ, closure in (("rk4", "exact"), ("implicit_euler", "penalty")):
     sim = Simulator(sc.model, SimulationSettings(integrator=integ, closure=closure), sc.gains)
-    assert sim.mechanism._work[-1][sc.model.n_rows, 0] == 0
+    assert sim.mechanism.new_data().layout[sc.model.n_rows, 0] == 0
     big = SampleBlock(sc.model, 200)
     sim.blocks_compiled()
     sim.advance_block(big, 200)

@@ -1,7 +1,9 @@
-"""Compiled joint-space inverse dynamics of a closed chain, for controllers at 1 kHz and more.
+"""The closed-chain reduction, compiled, and joint-space inverse dynamics for controllers at 1 kHz.
 
-One call of the simulator's compiled kernel (:func:`vjm_ros.core.kernels.step`, ``EVALUATE``) fills
-``M``, ``b``, ``A``, ``Adot qd``, ``C`` and ``A qd`` into preallocated buffers; one compiled
+:func:`velocity_map` forms ``S`` and ``s`` (``qd = S ud``, ``qdd = S udd + s``) from the closure
+rows: the one definition of the reduction, which :mod:`vjm_ros.control.closed_model` calls too.
+One evaluation by the simulator's compiled kernel (:func:`vjm_ros.core.kernels.evaluate`) fills
+``M``, ``b``, ``A``, ``Adot qd``, ``C`` and ``A qd`` into a workspace of its own; one compiled
 function (:func:`reduced_inverse_dynamics`) forms ``S``, ``s``, ``w = S^T (M (S udd + s) + b)``,
 ``P = S^T B``, the minimum ``W``-norm efforts and the preload along the oriented null-space
 direction of ``P`` (the generalized cross product of its rows,
@@ -20,6 +22,62 @@ from vjm_ros.core.model import Model
 
 OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS, OFF_VELOCITIES = range(7)
 """Status codes of :func:`reduced_inverse_dynamics`."""
+
+
+@K._jit
+def velocity_map(jac, adot_qd, independent, dependent, singular_tolerance, s_map, s_bias):
+    """``S`` and ``s`` of the closed chain at one state; the smallest singular value of ``A_v``.
+
+    With ``A = [A_u A_v]`` (columns ``independent`` and ``dependent``): ``S = [I; -A_v^-1 A_u]``
+    (``A S = 0``) and ``s = [0; -A_v^-1 (Adot qd)]``, so that ``qd = S ud`` and
+    ``qdd = S udd + s``.
+
+    Parameters
+    ----------
+    jac : ndarray, shape (r, n)
+        ``A``.
+    adot_qd : ndarray, shape (r,)
+        ``Adot qd``, m/s^2 or rad/s^2.
+    independent : ndarray of int64, shape (d,)
+    dependent : ndarray of int64, shape (r,)
+        Coordinate indices, ``d + r = n``.
+    singular_tolerance : float
+        Below this smallest singular value of ``A_v`` (m per unit coordinate) nothing is solved.
+    s_map : ndarray, shape (n, d)
+        Receives ``S`` (its dependent rows only where ``A_v`` is regular).
+    s_bias : ndarray, shape (n,)
+        Receives ``s`` (likewise).
+
+    Returns
+    -------
+    float
+        The smallest singular value of ``A_v`` (``inf`` without closures).
+    """
+    d = independent.shape[0]
+    r = dependent.shape[0]
+    s_map[:, :] = 0.0
+    s_bias[:] = 0.0
+    for j in range(d):
+        s_map[independent[j], j] = 1.0
+    if r == 0:
+        return np.inf
+    a_v = np.empty((r, r))
+    rhs = np.empty((r, d + 1))
+    for i in range(r):
+        for j in range(r):
+            a_v[i, j] = jac[i, dependent[j]]
+        for j in range(d):
+            rhs[i, j] = jac[i, independent[j]]
+        rhs[i, d] = adot_qd[i]
+    smallest = np.linalg.svd(a_v)[1][r - 1]
+    if smallest < singular_tolerance:
+        return smallest
+    x = np.linalg.solve(a_v, rhs)
+    for i in range(r):
+        for j in range(d):
+            s_map[dependent[i], j] = -x[i, j]
+        s_bias[dependent[i]] = -x[i, d]
+    return smallest
 
 
 @K._jit
@@ -45,27 +103,11 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
     for i in range(r):
         if abs(crow[i, K.R_RATE]) > velocity_tolerance:
             return OFF_VELOCITIES
-    s_map = np.zeros((n, d))
-    s_bias = np.zeros(n)
-    for j in range(d):
-        s_map[independent[j], j] = 1.0
-    if r > 0:
-        a_v = np.empty((r, r))
-        rhs = np.empty((r, d + 1))
-        for i in range(r):
-            for j in range(r):
-                a_v[i, j] = jac[i, dependent[j]]
-            for j in range(d):
-                rhs[i, j] = jac[i, independent[j]]
-            rhs[i, d] = crow[i, K.R_BIAS]
-        sv = np.linalg.svd(a_v)[1]
-        if sv[r - 1] < singular_tolerance:
-            return SINGULAR
-        x = np.linalg.solve(a_v, rhs)
-        for i in range(r):
-            for j in range(d):
-                s_map[dependent[i], j] = -x[i, j]
-            s_bias[dependent[i]] = -x[i, d]
+    s_map = np.empty((n, d))
+    s_bias = np.empty(n)
+    if velocity_map(jac, crow[:, K.R_BIAS], independent, dependent, singular_tolerance, s_map,
+                    s_bias) < singular_tolerance:
+        return SINGULAR
     force = mm @ (s_map @ udd + s_bias) + bias
     w_out[:] = s_map.T @ force
     for k in range(m):
@@ -114,7 +156,7 @@ def preload_direction(jac, actuated, z):
 
 
 class CompiledInverseDynamics:
-    """Preallocated kernel buffers and index arrays of one model (one per controller).
+    """A workspace of the kernel and index arrays of one model (one per controller).
 
     Parameters
     ----------
@@ -128,17 +170,15 @@ class CompiledInverseDynamics:
 
         self.mech = Mechanism(model, ExactClosure(alpha=0.0, beta=0.0))
         n, self.n = model.n, model.n
-        self.buffers = self.mech._new_buffers()
-        self.args = (self.mech._lint, self.mech._lflt, self.mech._cint, self.mech._cflt,
-                     self.mech._gains, self.mech._par)
+        self.model = self.mech.packed
+        self.data = self.mech.new_data()
         self.independent = np.array(independent, dtype=np.int64)
         self.dependent = np.array([i for i in range(n) if i not in independent], dtype=np.int64)
         self.actuated = np.array([a.joint for a in model.actuators], dtype=np.int64)
         m, d = len(self.actuated), len(independent)
         self.ones, self.unlimited = np.ones(m), np.full(m, np.inf)
         self.zeros = np.zeros(n)
-        self.out_a, self.out_b = np.empty(n), np.empty(n)
-        self.work = K.workspace(n, len(self.buffers[4]))
+        self.qdd = np.empty(n)
         self.tau, self.p, self.w = np.empty(m), np.empty((d, m)), np.empty(d)
         self.direction = np.empty(m)
 
@@ -148,12 +188,11 @@ class CompiledInverseDynamics:
         """Evaluate the model at ``(q, qd)`` and the efforts for ``udd``; a status code."""
         if not _finite(q, qd, udd):
             return NONFINITE
-        status = K.step(K.EVALUATE, q, qd, self.zeros, 0.0, 1, 0.0, *self.args, *self.buffers,
-                        self.out_a, self.out_b, self.work, K.NO_KNOWN, -1)
-        if status:
+        data = self.data
+        if K.evaluate(self.model, data, q, qd, self.zeros, self.qdd):
             return SINGULAR
-        _, mm, bias, _, crow, jac, _ = self.buffers
-        return reduced_inverse_dynamics(mm, bias, jac, crow, self.independent, self.dependent,
+        return reduced_inverse_dynamics(data.mm, data.bias, data.jac, data.crow, self.independent,
+                                        self.dependent,
                                         self.actuated, udd, winv, limits, closure_tolerance,
                                         velocity_tolerance, singular_tolerance, preload,
                                         self.tau, self.p, self.w, self.direction)

@@ -17,11 +17,14 @@ A point ``P`` on link ``i`` moves with joint ``k`` of the same chain (``k <= i``
 ``e_z x (P - O_k)`` (revolute) or ``n(theta_pred_k)`` (prismatic). The mass matrix is
 ``sum_i m_i J_i^T J_i + I_i Jw_i^T Jw_i``, the bias ``sum_i J_i^T m_i (Jdot_i qdot - g)``.
 
-Everything is reached through one compiled entry point, :func:`step`, so that numba compiles the
-physics once (a few seconds on first use, then loaded from its cache in a fraction of a second).
+The entry points are named for what they compute (:func:`evaluate`, :func:`residual`,
+:func:`implicit_velocity`, :func:`advance`, :func:`project`); each takes the packed model
+(:class:`PackedModel`, read-only, shareable between threads) and a workspace (:class:`Data`, one
+per thread) and calls the one compiled kernel, :func:`step`, so that numba compiles the physics
+once (a few seconds on first use, then loaded from its cache in a fraction of a second).
 
-Model and method arrays (built by :func:`vjm_ros.core.packing.pack_model` and
-:func:`vjm_ros.core.packing.pack_method`):
+Model and method arrays (fields of :class:`PackedModel`, built by
+:func:`vjm_ros.core.packing.pack_model`):
 
 * ``lint`` int64 (n, 3): revolute flag, first-of-chain flag, index of the chain's first link;
 * ``lflt`` float64 (n, 10): base angle (rad), base origin x, y (m), predecessor length (m), locked
@@ -34,7 +37,8 @@ Model and method arrays (built by :func:`vjm_ros.core.packing.pack_model` and
 * ``par`` float64 (6,): method (0 penalty, 1 exact), Baumgarte ``alpha``, ``beta`` (1/s),
   ``rcond``, gravity ``gx``, ``gy`` (m/s^2).
 
-Output buffers (columns named by the ``K_*``, ``C_*`` and ``R_*`` constants):
+Output buffers (fields of :class:`Data`; columns named by the ``K_*``, ``C_*`` and ``R_*``
+constants):
 
 * ``kin`` (n + 1, 15): per link ``theta``, ``cos``, ``sin``, origin, ``omega``, origin velocity and
   bias acceleration, then ``cos``/``sin`` of the predecessor angle, the slide ``B``, the
@@ -45,13 +49,14 @@ Output buffers (columns named by the ``K_*``, ``C_*`` and ``R_*`` constants):
   ``(Fx, Fy, Mz)`` of a unit row force;
 * ``jac`` (r, n): ``A``; ``points`` (k, 2): application point ``Pa`` of each closure, m.
 
-:func:`step` returns a status: 0 on success, 1 when a matrix was exactly singular (the case in which
+The entry points return a status: 0 on success, 1 when a matrix was exactly singular (the case in which
 ``numpy.linalg.solve`` raises ``LinAlgError``).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -74,7 +79,7 @@ ANGLE = 2
 PENALTY = 0
 EXACT = 1
 
-# operations of run()
+# operations of step()
 EXPLICIT_EULER = 0
 SEMI_IMPLICIT_EULER = 1
 RK4 = 2
@@ -346,7 +351,135 @@ def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, 
                 add_angle_jacobian(jac, row, -1.0, lb, lint)
 
 
-# ---------------------------------------------------------------------------------- entry point
+# ---------------------------------------------------------------------------------- model and data
+class PackedModel(NamedTuple):
+    """The model and its closure method as the kernels read them (layouts in the module
+    docstring), built by :func:`vjm_ros.core.packing.pack_model`. The kernels never write it:
+    one value serves every thread.
+
+    Attributes
+    ----------
+    lint : ndarray of int64, shape (n, 3)
+    lflt : ndarray, shape (n, 10)
+    cint : ndarray of int64, shape (k, 4)
+    cflt : ndarray, shape (k, 7)
+    gains : ndarray, shape (r, 2)
+    par : ndarray, shape (6,)
+    blocks : ndarray of int64, shape (nb + 1,)
+        Boundaries ``0, ..., n`` of the mass matrix's diagonal blocks, one per chain
+        (:func:`vjm_ros.core.packing.chain_blocks`).
+    """
+
+    lint: np.ndarray
+    lflt: np.ndarray
+    cint: np.ndarray
+    cflt: np.ndarray
+    gains: np.ndarray
+    par: np.ndarray
+    blocks: np.ndarray
+
+
+class Data(NamedTuple):
+    """What the kernels write: the terms of the last evaluation and the scratch arrays of the
+    solves (:func:`make_data`). One per thread; nothing is allocated per call.
+
+    Attributes
+    ----------
+    kin, mm, bias, cm, crow, jac, points : ndarray
+        The terms of the last evaluation, shapes (n + 1, 15), (n, n), (n,), (n, 4), (r, 7),
+        (r, n), (k, 2) (module docstring).
+    lu : ndarray, shape (n, n)
+        LU factors of ``M`` (or of ``M + h A^T W A``).
+    piv : ndarray of int64, shape (n,)
+        Their pivots.
+    minv_at : ndarray, shape (n, r)
+        ``M^-1 A^T``.
+    g, v : ndarray, shape (r, r)
+        ``A M^-1 A^T`` and its eigenvectors.
+    vec : ndarray, shape (3 + r + nh, max(n, r, nh + 1))
+        Vectors of the solves (row 0: the multipliers; ``nh`` the hub chain's size).
+    rhs : ndarray, shape (r,)
+        Right-hand side of the closure solves.
+    corr : ndarray, shape (n,)
+        The correction they give.
+    ks, vs : ndarray, shape (4, n)
+        Stage accelerations and velocities of a step.
+    qi : ndarray, shape (n,)
+        Stage coordinates.
+    scratch : ndarray, shape (n,)
+        Accelerations of a step's stage.
+    spare : ndarray, shape (n,)
+        Unread second output of the entry points that have one output.
+    zero : ndarray, shape (n,)
+        Zeros (the rates of the evaluations without any).
+    touch : ndarray of int64, shape (r, max(nb, 1))
+        Diagonal blocks each closure row touches.
+    layout : ndarray of int64, shape (r + 1, c)
+        The closure layout (:func:`vjm_ros.core.packing.closure_layout`, a copy: the hub solves
+        write its scratch columns).
+    """
+
+    kin: np.ndarray
+    mm: np.ndarray
+    bias: np.ndarray
+    cm: np.ndarray
+    crow: np.ndarray
+    jac: np.ndarray
+    points: np.ndarray
+    lu: np.ndarray
+    piv: np.ndarray
+    minv_at: np.ndarray
+    g: np.ndarray
+    v: np.ndarray
+    vec: np.ndarray
+    rhs: np.ndarray
+    corr: np.ndarray
+    ks: np.ndarray
+    vs: np.ndarray
+    qi: np.ndarray
+    scratch: np.ndarray
+    spare: np.ndarray
+    zero: np.ndarray
+    touch: np.ndarray
+    layout: np.ndarray
+
+
+def output_shapes(model: PackedModel) -> tuple[tuple[int, ...], ...]:
+    """Shapes of ``kin, mm, bias, cm, crow, jac, points`` for ``model``."""
+    n, r, k = model.lint.shape[0], model.gains.shape[0], model.cint.shape[0]
+    return ((n + 1, N_KIN), (n, n), (n,), (n, N_CM), (r, N_CROW), (r, n), (k, 2))
+
+
+def make_data(model: PackedModel, layout: np.ndarray | None = None) -> Data:
+    """A workspace of the kernels for ``model`` (built in Python once per mechanism and thread:
+    compiled callers receive it, so nothing is allocated per call).
+
+    Parameters
+    ----------
+    model : PackedModel
+    layout : ndarray of int64, optional
+        :func:`vjm_ros.core.packing.closure_layout` (copied); omitted, no hub layout (the dense
+        solves).
+    """
+    n, r = model.lint.shape[0], model.gains.shape[0]
+    blocks = model.blocks
+    if layout is None:
+        layout = np.zeros((r + 1, N_HUB_COLUMNS), dtype=np.int64)
+        layout[r, 0] = -1
+    lay = np.array(layout, dtype=np.int64)
+    hub = lay[r, 0]
+    nh = int(blocks[hub + 1] - blocks[hub]) if hub >= 0 else 0
+    m = max(n, r, nh + 1)
+    outputs = [np.empty(shape) for shape in output_shapes(model)]
+    return Data(*outputs, lu=np.empty((n, n)), piv=np.empty(n, dtype=np.int64),
+                minv_at=np.empty((n, r)), g=np.empty((r, r)), v=np.empty((r, r)),
+                vec=np.zeros((3 + r + nh, m)), rhs=np.empty(r), corr=np.empty(n),
+                ks=np.zeros((4, n)), vs=np.zeros((4, n)), qi=np.empty(n), scratch=np.empty(n),
+                spare=np.empty(n), zero=np.zeros(n),
+                touch=np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64), layout=lay)
+
+
+# ---------------------------------------------------------------------------------- entry points
 NO_KNOWN = np.empty((0, 0))
 """``known`` argument of :func:`step` when no acceleration is known."""
 NO_ROW = -1
@@ -362,85 +495,69 @@ those as ``Literal[int](-1)`` and compiles a whole extra copy of :func:`step` fo
 signature (seconds each on a cold cache)."""
 
 
-def run(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
-        kin, mm, bias, cm, crow, jac, points, out_a, out_b):
-    """:func:`step` with a fresh workspace (a convenience: callers that evaluate often keep a
-    :func:`workspace` and call :func:`step`, the compiled entry point, themselves).
+def evaluate(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+             qdd: np.ndarray, kernel=None) -> int:
+    """Every term at ``(q, qd)`` into ``data`` and the accelerations with efforts ``tau``.
 
     Parameters
     ----------
-    op : int
-        What to do:
-
-        * :data:`EVALUATE`: every term at ``(q0, qd0)``; ``out_a = qdd``; the ground row of
-          ``kin`` receives the kinetic, potential and penalty energy (J) in columns
-          :data:`K_PCOS`, :data:`K_PSIN`, :data:`K_SLIDE`;
-        * :data:`IMPLICIT_VELOCITY`: ``out_a = v``, the velocity after a step of length ``h``
-          implicit in the penalty forces (``qd0 + h qdd`` for exact closures);
-        * :data:`EXPLICIT_EULER`, :data:`SEMI_IMPLICIT_EULER`, :data:`RK4`,
-          :data:`IMPLICIT_EULER`: ``steps`` steps of length ``h`` of that integrator
-          (:mod:`vjm_ros.core.integrators.fixed`); ``(out_a, out_b) = (q, qd)`` at the end;
-          plus :data:`THEN_EVALUATE` (:func:`step` only), followed by an evaluation at the end
-          state into ``known[row + 1]``;
-        * :data:`RESIDUAL`: closure residuals at ``q0`` with zero rates, no Jacobian (in ``crow``);
-        * :data:`PROJECT`: ``(out_a, out_b) = (q, qd)`` projected onto the closure manifold, the
-          algorithm of
-          :meth:`vjm_ros.core.mechanism.Mechanism.project` (at most ``steps`` Gauss-Newton steps in the
-          metric of ``M`` until ``max |C| <= tol``, then one velocity projection,
-          ``rcond = 1e-10``).
-    q0, qd0, tau : ndarray, shape (n,)
+    model : PackedModel
+    data : Data
+        Receives the terms; the ground row of ``kin`` the kinetic, potential and penalty energy
+        (J) in columns :data:`K_PCOS`, :data:`K_PSIN`, :data:`K_SLIDE`.
+    q, qd, tau : ndarray, shape (n,)
         State (rad or m, rad/s or m/s) and efforts (N m or N); not modified.
-    h : float
-        Step, s.
-    steps : int
-    tol : float
-        Projection tolerance, m or rad.
-    lint, lflt, cint, cflt, gains, par : ndarray
-        Model and method arrays (module docstring).
-    kin, mm, bias, cm, crow, jac, points : ndarray
-        Output buffers (module docstring); they hold the terms of the last evaluation on return.
-    out_a, out_b : ndarray, shape (n,)
-        Outputs, as listed under ``op``.
+    qdd : ndarray, shape (n,)
+        Receives the accelerations, rad/s^2 or m/s^2.
+    kernel : callable, optional
+        :func:`step` (the default) or a copy of it (:data:`step_with_hub`, a tiered entry).
 
     Returns
     -------
     int
         0, or 1 when a matrix was exactly singular.
     """
-    return step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
-                kin, mm, bias, cm, crow, jac, points, out_a, out_b,
-                workspace(q0.shape[0], crow.shape[0]), NO_KNOWN, NO_ROW)
+    return (kernel or step)(EVALUATE, q, qd, tau, 0.0, ONE_STEP, 0.0, model, data, qdd,
+                            data.spare, NO_KNOWN, NO_ROW)
 
 
-def workspace(n: int, r: int, blocks: np.ndarray | None = None,
-              layout: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """Scratch arrays of :func:`step` for ``n`` coordinates and ``r`` closure rows (built in
-    Python once per mechanism: compiled callers receive it, so nothing is allocated per call).
+def residual(model: PackedModel, data: Data, q: np.ndarray, kernel=None) -> int:
+    """Closure residuals at ``q`` with zero rates, without the dynamics or the Jacobian, into
+    ``data.kin`` and ``data.crow`` (columns :data:`R_RES`, :data:`R_DX` .. :data:`R_DZ`)."""
+    return (kernel or step)(RESIDUAL, q, q, q, 0.0, ONE_STEP, 0.0, model, data, data.spare,
+                            data.spare, NO_KNOWN, NO_ROW)
 
-    Parameters
-    ----------
-    n, r : int
-    blocks : ndarray of int64, shape (nb + 1,), optional
-        Boundaries ``0, ..., n`` of the mass matrix's diagonal blocks, one per chain
-        (:func:`vjm_ros.core.packing.chain_blocks`); omitted, ``M`` is taken as one dense block.
-    layout : ndarray of int64, optional
-        :func:`vjm_ros.core.packing.closure_layout` (copied); omitted, no hub layout (the dense
-        solves).
+
+def implicit_velocity(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray,
+                      tau: np.ndarray, h: float, v: np.ndarray, kernel=None) -> int:
+    """``v``, the velocity after a step of length ``h`` (s) implicit in the penalty forces
+    (``qd + h qdd`` for exact closures); arguments and status as :func:`evaluate`."""
+    return (kernel or step)(IMPLICIT_VELOCITY, q, qd, tau, h, ONE_STEP, 0.0, model, data, v,
+                            data.spare, NO_KNOWN, NO_ROW)
+
+
+def advance(model: PackedModel, data: Data, method: int, q: np.ndarray, qd: np.ndarray,
+            tau: np.ndarray, h: float, steps: int, q_out: np.ndarray, qd_out: np.ndarray,
+            kernel=None) -> int:
+    """``steps`` steps of length ``h`` (s) of a fixed-step method from ``(q, qd)``, efforts
+    held, into ``(q_out, qd_out)``.
+
+    ``method`` is :data:`EXPLICIT_EULER`, :data:`SEMI_IMPLICIT_EULER`, :data:`RK4` or
+    :data:`IMPLICIT_EULER` (:mod:`vjm_ros.core.integrators.fixed`); ``data`` holds the terms of
+    the last stage. Status as :func:`evaluate`.
     """
-    if blocks is None:
-        blocks = np.array([0, n], dtype=np.int64)
-    blocks = np.ascontiguousarray(blocks, dtype=np.int64)
-    if layout is None:
-        layout = np.zeros((r + 1, N_HUB_COLUMNS), dtype=np.int64)
-        layout[r, 0] = -1
-    lay = np.array(layout, dtype=np.int64)
-    hub = lay[r, 0]
-    nh = int(blocks[hub + 1] - blocks[hub]) if hub >= 0 else 0
-    m = max(n, r, nh + 1)
-    return (np.empty((n, n)), np.empty(n, dtype=np.int64), np.empty((n, r)), np.empty((r, r)),
-            np.empty((r, r)), np.zeros((3 + r + nh, m)), np.empty(r), np.empty(n),
-            np.zeros((4, n)), np.zeros((4, n)), np.empty(n), np.empty(n), np.zeros(n), blocks,
-            np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64), lay)
+    return (kernel or step)(method, q, qd, tau, h, steps, 0.0, model, data, q_out, qd_out,
+                            NO_KNOWN, NO_ROW)
+
+
+def project(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, steps: int,
+            tol: float, q_out: np.ndarray, qd_out: np.ndarray, kernel=None) -> int:
+    """``(q, qd)`` projected onto the closures, into ``(q_out, qd_out)``: at most ``steps``
+    Gauss-Newton steps in the metric of ``M`` until ``max |C| <= tol`` (m or rad), then one
+    velocity projection (``rcond = 1e-10``), as
+    :meth:`vjm_ros.core.mechanism.Mechanism.project`. Status as :func:`evaluate`."""
+    return (kernel or step)(PROJECT, q, qd, data.zero, 0.0, steps, tol, model, data, q_out,
+                            qd_out, NO_KNOWN, NO_ROW)
 
 
 HUB_SOLVES = False
@@ -454,19 +571,54 @@ workspace has a hub layout (:meth:`vjm_ros.core.mechanism.Mechanism` picks). Giv
 
 
 @_jit(allocates=False)
-def step(op, q0, qd0, tau, h, steps, tol, lint, lflt, cint, cflt, gains, par,
-         kin, mm, bias, cm, crow, jac, points, out_a, out_b, work, known, row):
-    """The compiled entry point (what each ``op`` does: :func:`run`), with its scratch arrays
-    given (``work``, from :func:`workspace`): nothing is allocated per call.
+def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row):
+    """The one compiled kernel behind the entry points above: ``op`` says what it computes.
 
-    ``known[row]``, shape (n,), for a fixed-step method and ``row >= 0``: the acceleration at
-    ``(q0, qd0)`` with ``tau``, which the caller has just evaluated with :data:`EVALUATE` into
-    the same buffers (``kin`` .. ``points`` still hold that evaluation): the first stage of the
-    first step then reuses both, the same numbers with one evaluation fewer (:data:`IMPLICIT_EULER`
-    builds its system from the buffers); ``row = -1``: nothing known."""
+    numba compiles this one function (with its copies :data:`step_with_hub`, :data:`step_inline`)
+    rather than one per entry point: each copy holds the whole physics and takes seconds to
+    compile on a cold cache and tens of ms to load from it.
+
+    Parameters
+    ----------
+    op : int
+        * :data:`EVALUATE` (:func:`evaluate`): every term at ``(q0, qd0)``, ``out_a = qdd``;
+        * :data:`IMPLICIT_VELOCITY` (:func:`implicit_velocity`): ``out_a = v``;
+        * :data:`EXPLICIT_EULER`, :data:`SEMI_IMPLICIT_EULER`, :data:`RK4`,
+          :data:`IMPLICIT_EULER` (:func:`advance`): ``steps`` steps of length ``h``;
+          ``(out_a, out_b) = (q, qd)`` at the end; plus :data:`THEN_EVALUATE`, followed by an
+          evaluation at the end state into ``known[row + 1]``;
+        * :data:`RESIDUAL` (:func:`residual`): closure residuals at ``q0`` with zero rates;
+        * :data:`PROJECT` (:func:`project`): ``(out_a, out_b)`` the projected ``(q, qd)``, at
+          most ``steps`` Gauss-Newton steps, tolerance ``tol``.
+    q0, qd0, tau : ndarray, shape (n,)
+        Not modified.
+    h : float
+    steps : int
+    tol : float
+    model : PackedModel
+    data : Data
+        Holds the terms of the last evaluation on return.
+    out_a, out_b : ndarray, shape (n,)
+    known : ndarray, shape (rows, n)
+        ``known[row]``, for a fixed-step method and ``row >= 0``: the acceleration at
+        ``(q0, qd0)`` with ``tau``, which the caller has just evaluated with :data:`EVALUATE`
+        into the same ``data``: the first stage of the first step then reuses both, the same
+        numbers with one evaluation fewer (:data:`IMPLICIT_EULER` builds its system from the
+        buffers); ``row = -1`` (:data:`NO_ROW`, ``known`` :data:`NO_KNOWN`): nothing known.
+
+    Returns
+    -------
+    int
+        0, or 1 when a matrix was exactly singular.
+    """
+    lint, lflt, cint, cflt, gains, par, blocks = model
+    kin, mm, bias, cm, crow, jac, points = (data.kin, data.mm, data.bias, data.cm, data.crow,
+                                            data.jac, data.points)
+    lu, piv, minv_at, g, v, vec = data.lu, data.piv, data.minv_at, data.g, data.v, data.vec
+    rhs, corr, ks, vs, qi, scratch = data.rhs, data.corr, data.ks, data.vs, data.qi, data.scratch
+    zero, touch, lay = data.zero, data.touch, data.layout
     n = q0.shape[0]
     r = crow.shape[0]
-    lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi, scratch, zero, blocks, touch, lay = work
     then_evaluate = op >= THEN_EVALUATE
     if then_evaluate:
         op = op - THEN_EVALUATE

@@ -2,8 +2,10 @@
 
 :class:`Mechanism` is what the simulator, the integrators, the node, the controllers and the
 studies see. Every quantity comes from the scalar chain recursions of :mod:`vjm_ros.core.kernels`
-(compiled by numba, or run as plain Python where numba is missing) through one entry point,
-:func:`vjm_ros.core.kernels.step`:
+(compiled by numba, or run as plain Python where numba is missing) through its entry points
+(:func:`~vjm_ros.core.kernels.evaluate`, :func:`~vjm_ros.core.kernels.project`, ...) on the
+packed model (:attr:`Mechanism.packed`) and the instance's workspace
+(:class:`~vjm_ros.core.kernels.Data`):
 
 * ``accelerations``, ``implicit_penalty_velocity``, ``evaluate``, ``energies`` and ``project``:
   the equations of motion (docs/design.md sections 1-2);
@@ -39,7 +41,7 @@ from vjm_ros.core import pipeline
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
-from vjm_ros.core.packing import chain_blocks, closure_layout, pack_method, pack_model
+from vjm_ros.core.packing import closure_layout, pack_method, pack_model
 from vjm_ros.jit import tiers
 
 
@@ -93,10 +95,10 @@ def _vec(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def _unpack(buffers: tuple[np.ndarray, ...], n: int) -> tuple[DynamicsTerms, ClosureTerms]:
-    """The kernel's output buffers (layout in :mod:`vjm_ros.core.kernels`) as value objects
-    (views of the buffers, nothing copied)."""
-    kin, mm, bias, cm, crow, jac, points = buffers
+def _unpack(buffers: K.Data, n: int) -> tuple[DynamicsTerms, ClosureTerms]:
+    """The kernel's output buffers (the first seven fields of a :class:`~vjm_ros.core.kernels.Data`)
+    as value objects (views of the buffers, nothing copied)."""
+    kin, mm, bias, cm, crow, jac, points = buffers[:7]
     rotation = np.empty((n + 1, 2, 2))
     rotation[:, 0, 0] = kin[:, K.K_COS]
     rotation[:, 1, 0] = kin[:, K.K_SIN]
@@ -131,8 +133,9 @@ class Mechanism:
     """Open chains closed by penalty forces or multipliers, evaluated by the compiled kernel.
 
     The closure method is packed for the kernel when it is assigned: assign a new one rather than
-    changing its gains in place. An instance keeps scratch buffers, so use one instance per
-    thread (the kernel itself releases the GIL).
+    changing its gains in place. An instance keeps a workspace, so use one instance per
+    thread (the kernel itself releases the GIL); compiled callers that share its packed model
+    (:attr:`packed`) take a workspace of their own (:meth:`new_data`).
 
     Parameters
     ----------
@@ -167,16 +170,13 @@ class Mechanism:
     def __init__(
         self, model: Model, method: PenaltyClosure | ExactClosure, warm_up: bool = True
     ):
-        self._lint, self._lflt, self._cint, self._cflt = pack_model(model)
-        n, r, k = model.n, model.n_rows, len(model.closures)
-        self._shapes = ((n + 1, K.N_KIN), (n, n), (n,), (n, K.N_CM), (r, K.N_CROW), (r, n), (k, 2))
-        self._buffers = self._new_buffers()
-        blocks = chain_blocks(model)
-        layout = closure_layout(model, blocks)
-        self._work = K.workspace(n, r, blocks, layout)
+        self._packed = pack_model(model, method)
+        n, r = model.n, model.n_rows
+        self._layout = closure_layout(model, self._packed.blocks)
+        self._data = self.new_data()
         # the compiled copies with the hub solves only where there is a hub layout (they take
         # seconds more to compile)
-        hub = layout[r, 0] >= 0
+        hub = self._layout[r, 0] >= 0
         # as plain Python while numba compiles them, on a machine whose cache lacks them
         # (vjm_ros.core.tiers); the compiled functions themselves once they are in use
         self._step = tiers.entry(K, "step_with_hub" if hub else "step",
@@ -210,49 +210,49 @@ class Mechanism:
     @method.setter
     def method(self, value: PenaltyClosure | ExactClosure) -> None:
         self._method = value
-        self._gains, self._par = pack_method(value, self.model)
-        self._packed = (self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par)
+        gains, par = pack_method(value, self.model)
+        self._packed = self._packed._replace(gains=gains, par=par)
 
-    def _new_buffers(self) -> tuple[np.ndarray, ...]:
-        """Fresh output buffers ``kin, mm, bias, cm, crow, jac, points`` (see :mod:`._kernels`)."""
-        return tuple(np.empty(shape) for shape in self._shapes)
+    @property
+    def packed(self) -> K.PackedModel:
+        """The model and closure method as the kernels read them (read-only: the mechanism's
+        kernels use these very arrays; assign :attr:`method` to change the method)."""
+        return self._packed
 
-    def _run(
-        self,
-        op: int,
-        q: np.ndarray,
-        qd: np.ndarray,
-        tau: np.ndarray,
-        h: float = 0.0,
-        steps: int = 1,
-        tol: float = 0.0,
-        buffers: tuple[np.ndarray, ...] | None = None,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Call :func:`vjm_ros.core.kernels.step` and turn a singular matrix into ``LinAlgError``.
+    def new_data(self, fill: float | None = None) -> K.Data:
+        """A fresh workspace of the kernels for this mechanism (:func:`vjm_ros.core.kernels.make_data`),
+        e.g. for another thread; ``fill``: the value its output buffers start with (uninitialized
+        when None)."""
+        data = K.make_data(self._packed, self._layout)
+        if fill is not None:
+            for buffer in data[:7]:
+                buffer.fill(fill)
+        return data
 
-        ``buffers`` receive the terms of the last evaluation (the instance's scratch buffers when
-        omitted). Returns the kernel's two output vectors, fresh arrays of shape (n,).
-        """
-        out_a = np.empty(self.n)
-        out_b = np.empty(self.n)
-        status = self._step(
-            op, q, qd, tau, h, steps, tol, self._lint, self._lflt, self._cint, self._cflt,
-            self._gains, self._par, *(self._buffers if buffers is None else buffers), out_a, out_b,
-            self._work, K.NO_KNOWN, -1,
-        )
+    def _fresh_outputs(self, fill: float | None = None) -> K.Data:
+        """The instance's workspace with fresh output buffers (the scratch arrays shared)."""
+        shapes = K.output_shapes(self._packed)
+        make = np.empty if fill is None else np.zeros
+        return self._data._replace(**{name: make(shape)
+                                      for name, shape in zip(K.Data._fields[:7], shapes, strict=True)})
+
+    def _check(self, status: int) -> None:
+        """Settle the tiered kernel (:meth:`_settle_step`); a singular matrix as ``LinAlgError``."""
         if type(self._step) is tiers.Tiered:
-            self._settle("_step")
+            self._settle_step()
         if status:
             raise np.linalg.LinAlgError("Singular matrix")
-        return out_a, out_b
 
-    def _settle(self, name: str) -> None:
-        """Call the entry point ``name`` (``"_step"``, ``"_advance_ticks"``) by its compiled
-        function from now on if that is in use: the tiers' wrapper costs about 1 µs per call
-        (an eighth of an evaluation of the four-bar)."""
-        entry = getattr(self, name)
-        if entry.ready:
-            setattr(self, name, entry.compiled)
+    def _settle_step(self) -> None:
+        """Call the kernel by its compiled function from now on if that is in use: the tiers'
+        wrapper costs about 1 µs per call (an eighth of an evaluation of the four-bar)."""
+        if self._step.ready:
+            self._step = self._step.compiled
+
+    def _settle_ticks(self) -> None:
+        """:meth:`_settle_step` for the block pipeline."""
+        if self._advance_ticks.ready:
+            self._advance_ticks = self._advance_ticks.compiled
 
     @property
     def entry_points(self) -> tuple:
@@ -275,7 +275,8 @@ class Mechanism:
         q, qd = self.model.initial_state()
         if type(self._step) is tiers.Tiered:
             self._step.eager()
-        self._run(K.EVALUATE, q, qd, np.zeros(self.n))
+        self._check(K.evaluate(self._packed, self._data, q, qd, np.zeros(self.n),
+                               np.empty(self.n), self._step))
         return time.perf_counter() - start
 
     @property
@@ -319,7 +320,10 @@ class Mechanism:
             When the mass matrix is exactly singular (as ``numpy.linalg.solve``).
         """
         self.evaluations += 1
-        return self._run(K.EVALUATE, _vec(q), _vec(qd), _vec(tau))[0]
+        qdd = np.empty(self.n)
+        self._check(K.evaluate(self._packed, self._data, _vec(q), _vec(qd), _vec(tau), qdd,
+                               self._step))
+        return qdd
 
     def implicit_penalty_velocity(
         self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, h: float
@@ -343,7 +347,10 @@ class Mechanism:
             rad/s or m/s.
         """
         self.evaluations += 1
-        return self._run(K.IMPLICIT_VELOCITY, _vec(q), _vec(qd), _vec(tau), float(h))[0]
+        v = np.empty(self.n)
+        self._check(K.implicit_velocity(self._packed, self._data, _vec(q), _vec(qd), _vec(tau),
+                                        float(h), v, self._step))
+        return v
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> Evaluation:
         """Accelerations, closure forces and every derived quantity at one state.
@@ -358,12 +365,14 @@ class Mechanism:
             Fresh arrays, some of them views of one another (nothing is shared with later calls).
         """
         self.evaluations += 1
-        buffers = self._new_buffers()
-        qdd, _ = self._run(K.EVALUATE, _vec(q), _vec(qd), _vec(tau), buffers=buffers)
-        energy = buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1].copy()
-        buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0
-        dyn, closure = _unpack(buffers, self.n)
-        return Evaluation(qdd, dyn, closure, buffers[4][:, K.R_FORCE], energy)
+        data = self._fresh_outputs()
+        qdd = np.empty(self.n)
+        self._check(K.evaluate(self._packed, data, _vec(q), _vec(qd), _vec(tau), qdd,
+                               self._step))
+        energy = data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1].copy()
+        data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0
+        dyn, closure = _unpack(data, self.n)
+        return Evaluation(qdd, dyn, closure, data.crow[:, K.R_FORCE], energy)
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
         """Kinetic, potential, constraint and total energy, J.
@@ -400,22 +409,20 @@ class Mechanism:
         """
         if self._rows == 0:
             return q, qd
-        zero = np.zeros(self.n)
-        return self._run(
-            K.PROJECT, _vec(q), _vec(qd), zero, steps=int(iterations), tol=float(tol)
-        )
+        q_out, qd_out = np.empty(self.n), np.empty(self.n)
+        self._check(K.project(self._packed, self._data, _vec(q), _vec(qd), int(iterations),
+                              float(tol), q_out, qd_out, self._step))
+        return q_out, qd_out
 
     # ------------------------------------------------------------------ extras
     def closure_jacobian(self, q: np.ndarray) -> np.ndarray:
         """The closure Jacobian ``A(q)``, shape (r, n), from one kernel call (``evaluations``
         unchanged: this is not a right-hand side; a singular mass matrix does not matter)."""
         zero = np.zeros(self.n)
-        self._step(K.EVALUATE, _vec(q), zero, zero, 0.0, 1, 0.0, self._lint, self._lflt, self._cint,
-               self._cflt, self._gains, self._par, *self._buffers, np.empty(self.n),
-               np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        K.evaluate(self._packed, self._data, _vec(q), zero, zero, np.empty(self.n), self._step)
         if type(self._step) is tiers.Tiered:
-            self._settle("_step")
-        return self._buffers[5].copy()
+            self._settle_step()
+        return self._data.jac.copy()
 
     def closure_errors(self, q: np.ndarray) -> np.ndarray:
         """Size of each closure's residual at ``q`` (what the simulator's divergence guard reads).
@@ -432,8 +439,8 @@ class Mechanism:
             m for hinge and slider, rad for angle closures.
         """
         q = _vec(q)
-        self._run(K.RESIDUAL, q, q, q)
-        res = self._buffers[4][:, K.R_RES].copy()
+        self._check(K.residual(self._packed, self._data, q, self._step))
+        res = self._data.crow[:, K.R_RES].copy()
         return self.closures.errors(ClosureTerms(res, res, res, res, res, res))
 
     def kinematics(self, q: np.ndarray, qd: np.ndarray | None = None) -> Kinematics:
@@ -477,14 +484,15 @@ class Mechanism:
         """
         q = _vec(q)
         qd = np.zeros(self.n) if qd is None else _vec(qd)
-        buffers = tuple(np.zeros(shape) for shape in self._shapes)
-        self._step(K.EVALUATE if jacobian else K.RESIDUAL, q, qd, np.zeros(self.n), 0.0, 1, 0.0,
-               self._lint, self._lflt, self._cint, self._cflt, self._gains, self._par, *buffers,
-               np.empty(self.n), np.empty(self.n), self._work, K.NO_KNOWN, -1)
+        data = self._fresh_outputs(fill=0.0)
+        if jacobian:
+            K.evaluate(self._packed, data, q, qd, np.zeros(self.n), np.empty(self.n), self._step)
+        else:
+            K.residual(self._packed, data, q, self._step)
         if type(self._step) is tiers.Tiered:
-            self._settle("_step")
-        buffers[0][self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
-        return _unpack(buffers, self.n)
+            self._settle_step()
+        data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
+        return _unpack(data, self.n)
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Joint-space inertia matrix ``M(q)``, shape (n, n) (kg, kg m, kg m^2)."""
@@ -516,7 +524,10 @@ class Mechanism:
             raise ValueError(f"method: expected one of {_FIXED_METHODS}, found {method!r}")
         stages = 4 if method == K.RK4 else 1
         self.evaluations += stages * int(steps)
-        return self._run(int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(steps))
+        q_out, qd_out = np.empty(self.n), np.empty(self.n)
+        self._check(K.advance(self._packed, self._data, int(method), _vec(q), _vec(qd), _vec(tau),
+                              float(h), int(steps), q_out, qd_out, self._step))
+        return q_out, qd_out
 
 
     def warm_up_pipeline(self) -> float:
@@ -559,20 +570,20 @@ class Mechanism:
             # as plain Python (tiers), a few ticks per call: the compiled code takes over as soon
             # as it is there; each call's first tick evaluates its start state itself
             # a compiled function has no tiers; with the tiers off the call loads it at once
-            ready = getattr(advance, "ready", True) or not tiers.enabled()
+            ready = not isinstance(advance, tiers.Tiered) or advance.ready or not tiers.enabled()
             part = rows - done if ready else min(PLAIN_PART_TICKS, rows - done)
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
                 int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
-                bool(project), float(limit), self._packed, self._buffers, lengths, plink, plocal,
-                part_out, self._work, self._tick_state,
+                bool(project), float(limit), self._packed, self._data, lengths, plink, plocal,
+                part_out, self._tick_state,
             )
             reused = max(ran - 1, 0)  # each tick after a call's first starts from the sample before
             self.evaluations += ran * (stages * int(substeps) + 1) - reused
             done += int(ran)
             if code or done >= rows:
                 if type(advance) is tiers.Tiered:
-                    self._settle("_advance_ticks")
+                    self._settle_ticks()
                 return done, int(code)
             q, qd = out[0][done - 1], out[1][done - 1]
 

@@ -1,7 +1,8 @@
 """The model and the closure method as the flat arrays the compiled kernels read.
 
-Layouts in :mod:`vjm_ros.core.kernels`; the arrays are built once per mechanism (and again when
-its closure method is replaced).
+Layouts in :mod:`vjm_ros.core.kernels`; :func:`pack_model` builds them, as one
+:class:`~vjm_ros.core.kernels.PackedModel`, once per mechanism (its closure method's arrays again
+when the method is replaced).
 """
 
 from __future__ import annotations
@@ -16,8 +17,25 @@ from vjm_ros.core.model import ANGLE, HINGE, SLIDER, Model
 _KIND_CODE = {HINGE: K.HINGE, SLIDER: K.SLIDER, ANGLE: K.ANGLE}
 
 
-def pack_model(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The model as the flat arrays the kernels read (layout in :mod:`vjm_ros.core.kernels`).
+def pack_model(model: Model, method: PenaltyClosure | ExactClosure) -> K.PackedModel:
+    """The model and its closure method as the kernels read them.
+
+    Parameters
+    ----------
+    model : Model
+    method : PenaltyClosure or ExactClosure
+
+    Returns
+    -------
+    PackedModel
+        :func:`pack_links`, :func:`pack_method` and :func:`chain_blocks` (layouts in
+        :mod:`vjm_ros.core.kernels`).
+    """
+    return K.PackedModel(*pack_links(model), *pack_method(method, model), chain_blocks(model))
+
+
+def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The links and closures as the flat arrays the kernels read.
 
     Parameters
     ----------

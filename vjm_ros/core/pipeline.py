@@ -74,17 +74,17 @@ _tick_step = K.step_inline
 
 
 @_jit(allocates=False, inline="always")
-def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, evaluated):
+def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated):
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
     Parameters
     ----------
     row : int
     q, qd, tau : ndarray, shape (n,)
-    model : tuple
-        ``(lint, lflt, cint, cflt, gains, par)`` (:mod:`vjm_ros.core.kernels`).
-    buffers : tuple
-        ``(kin, mm, bias, cm, crow, jac, points)`` scratch buffers of the kernel.
+    model : PackedModel
+        :class:`vjm_ros.core.kernels.PackedModel`.
+    data : Data
+        The kernel's workspace (:func:`vjm_ros.core.kernels.make_data`).
     lengths : ndarray, shape (n,)
         Link lengths, m.
     plink : ndarray of int64, shape (p,)
@@ -94,10 +94,8 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, 
     out : tuple
         ``(q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation,
         segments)`` output arrays (module docstring).
-    work : tuple
-        Scratch arrays from :func:`vjm_ros.core.kernels.workspace`.
     evaluated : bool
-        The buffers already hold the evaluation at ``(q, qd)`` with ``tau``, its acceleration
+        ``data`` already holds the evaluation at ``(q, qd)`` with ``tau``, its acceleration
         in ``out``'s ``qdd[row]`` and its energies in ``kin``'s ground row (a step made with
         :data:`~vjm_ros.core.kernels.THEN_EVALUATE`); False: evaluate here.
 
@@ -106,16 +104,15 @@ def observe(row, q, qd, tau, model, buffers, lengths, plink, plocal, out, work, 
     int
         0, or 1 when the mass matrix was exactly singular.
     """
-    lint, lflt, cint, cflt, gains, par = model
-    kin, mm, bias, cm, crow, jac, cpts = buffers
+    cint, gains, par = model.cint, model.gains, model.par
+    kin, crow, cpts = data.kin, data.crow, data.points
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
     status = 0
     if not evaluated:
-        status = _step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, lint, lflt, cint, cflt,
-                        gains, par, kin, mm, bias, cm, crow, jac, cpts, o_qdd[row], o_qd[row],
-                        work, o_qdd, K.NO_ROW)
+        status = _step(K.EVALUATE, q, qd, tau, 0.0, K.ONE_STEP, 0.0, model, data, o_qdd[row],
+                       o_qd[row], o_qdd, K.NO_ROW)
     power = 0.0
     for j in range(n):
         o_q[row, j] = q[j]
@@ -174,8 +171,8 @@ def tick_state(n: int) -> tuple[np.ndarray, ...]:
 
 
 @_jit(allocates=False)
-def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, buffers,
-                  lengths, plink, plocal, out, work, state):
+def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, data,
+                  lengths, plink, plocal, out, state):
     """``ticks`` control ticks of ``substeps`` steps of ``method``, each observed.
 
     Parameters
@@ -195,7 +192,7 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         most, tolerance 1e-12, as :meth:`vjm_ros.core.mechanism.Mechanism.project`).
     limit : float
         Largest accepted closure residual, m or rad (``inf``: no check).
-    model, buffers, lengths, plink, plocal, out, work
+    model, data, lengths, plink, plocal, out
         As in :func:`observe`.
     state : tuple
         Five scratch vectors of shape (n,) from :func:`tick_state`.
@@ -208,15 +205,13 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         :data:`OK`, or why tick ``done`` failed: :data:`SINGULAR`, :data:`NOT_FINITE`,
         :data:`BEYOND_LIMIT`.
     """
-    lint, lflt, cint, cflt, gains, par = model
-    kin, mm, bias, cm, crow, jac, cpts = buffers
     n = q0.shape[0]
     q, qd, qa, qb, zero = state
     for j in range(n):
         q[j] = q0[j]
         qd[j] = qd0[j]
         zero[j] = 0.0
-    k = cint.shape[0]
+    k = model.cint.shape[0]
     o_qdd = out[2]
     o_error = out[6]
     # Without a projection, the step also evaluates at its end state (THEN_EVALUATE): the
@@ -226,14 +221,12 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         # From the second tick on, the first stage (RK4) or the first step's evaluation is the
         # one observed at the last tick (the same state and efforts; the buffers still hold it).
         known = t - 1  # t = 0: NO_ROW
-        status = _tick_step(op, q, qd, tau, h, substeps, 0.0, lint, lflt, cint, cflt, gains,
-                             par, kin, mm, bias, cm, crow, jac, cpts, qa, qb, work, o_qdd, known)
+        status = _tick_step(op, q, qd, tau, h, substeps, 0.0, model, data, qa, qb, o_qdd, known)
         if status != 0:
             return t, SINGULAR
         if project:
-            status = _step(K.PROJECT, qa, qb, zero, 0.0, K.PROJECTION_STEPS, 1e-12, lint, lflt,
-                            cint, cflt, gains, par, kin, mm, bias, cm, crow, jac, cpts, q, qd,
-                            work, o_qdd, K.NO_ROW)
+            status = _step(K.PROJECT, qa, qb, zero, 0.0, K.PROJECTION_STEPS, 1e-12, model, data,
+                           q, qd, o_qdd, K.NO_ROW)
             if status != 0:
                 return t, SINGULAR
         else:
@@ -243,8 +236,7 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         for j in range(n):
             if not (math.isfinite(q[j]) and math.isfinite(qd[j])):
                 return t, NOT_FINITE
-        if observe(t, q, qd, tau, model, buffers, lengths, plink, plocal, out, work,
-                   not project) != 0:
+        if observe(t, q, qd, tau, model, data, lengths, plink, plocal, out, not project) != 0:
             return t, SINGULAR
         for c in range(k):
             if o_error[t, c] > limit:
