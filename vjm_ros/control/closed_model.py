@@ -36,7 +36,9 @@ closures: positions within ``closure_tolerance``, rates with ``|A qd|`` within
 (:mod:`vjm_ros.core`), the same compiled kernels as the simulator's, read through
 :meth:`~vjm_ros.core.mechanism.Mechanism.terms`. Joint-space inverse dynamics runs compiled as a
 whole (:mod:`vjm_ros.control.compiled`: ~12 us per call on three_chain); the rest forms the
-closed-chain algebra above in numpy from the kernel's ``M``, ``b``, ``A`` and ``Adot qd``.
+closed-chain algebra above in numpy from the kernel's ``M``, ``b``, ``A`` and ``Adot qd``, with
+``S`` and ``s`` from the one compiled definition both paths share
+(:func:`vjm_ros.control.compiled.velocity_map`).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from vjm_ros.control.arguments import number_array, real, vector
+from vjm_ros.control.compiled import velocity_map
 from vjm_ros.control.distribution import (
     check_preload,
     distribute,
@@ -189,6 +192,9 @@ class ClosedChainModel:
                 f"{len(independent)}")
         self.independent = [names.index(j) for j in independent]
         self.dependent = [i for i in range(self.n) if i not in self.independent]
+        self._independent = np.array(self.independent, dtype=np.int64)
+        self._dependent = np.array(self.dependent, dtype=np.int64)
+        self._compiled_id = None
         self.actuated = [a.joint for a in model.actuators]
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self.selection = model.actuator_matrix()
@@ -317,20 +323,16 @@ class ClosedChainModel:
                 f"found a residual of {np.max(np.abs(terms.residual)):.3g}; use assemble()")
         self._check_rates(terms.rate)
         a = terms.jacobian
-        a_v = a[:, self.dependent]
-        sv = np.linalg.svd(a_v, compute_uv=False) if a_v.size else np.ones(1)
-        if sv.size and sv[-1] < SINGULAR_TOLERANCE:
+        s_map = np.empty((self.n, self.dof))
+        bias = np.empty(self.n)
+        smallest = velocity_map(a, terms.bias, self._independent, self._dependent,
+                                SINGULAR_TOLERANCE, s_map, bias)
+        if smallest < SINGULAR_TOLERANCE:
             raise SingularConfigurationError(
                 f"q: a singular configuration of {self.model.name} (smallest singular value of "
-                f"the dependent-coordinate closure Jacobian {sv[-1]:.3g} < {SINGULAR_TOLERANCE:g});"
-                " the dependent coordinates are not determined by the independent ones here")
-        s_map = np.zeros((self.n, self.dof))
-        s_map[self.independent, np.arange(self.dof)] = 1.0
-        bias = np.zeros(self.n)
-        if a_v.size:
-            solve = np.linalg.solve(a_v, np.column_stack((a[:, self.independent], terms.bias)))
-            s_map[self.dependent] = -solve[:, : self.dof]
-            bias[self.dependent] = -solve[:, self.dof]
+                f"the dependent-coordinate closure Jacobian {smallest:.3g} < "
+                f"{SINGULAR_TOLERANCE:g}); the dependent coordinates are not determined by the "
+                "independent ones here")
         return s_map, bias, a
 
     def _check_rates(self, rate: np.ndarray) -> None:
@@ -479,7 +481,7 @@ class ClosedChainModel:
         preload = real(preload, "preload", "N m or N")
         check_preload(preload, self.dof, len(self.actuated), self.model.name)
         if xdd is None and point is None and udd is not None and (
-            getattr(self, "_compiled_id", None) is not None or self._compiled() is not None
+            self._compiled_id is not None or self._compiled() is not None
         ):
             return self._inverse_dynamics_compiled(q, qd, udd, weights, preload, respect_limits)
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
@@ -521,7 +523,7 @@ class ClosedChainModel:
 
         if not HAVE_NUMBA:
             return None
-        if getattr(self, "_compiled_id", None) is None:
+        if self._compiled_id is None:
             from vjm_ros.control.compiled import CompiledInverseDynamics
 
             self._compiled_id = CompiledInverseDynamics(self.model, self.independent)
