@@ -391,7 +391,7 @@ def test_fuse_integrator_choices():
 def test_make_mechanism():
     model = load_scene("four_bar").model
     method = _method("exact", model.n_rows)
-    with pytest.raises(ValueError, match="'numpy' is no longer a choice.*use 'auto' or 'numba'"):
+    with pytest.raises(ValueError, match="kernel: expected one of auto, numba, found 'numpy'"):
         make_mechanism(model, method, "numpy")
     assert isinstance(make_mechanism(model, method, "numba"), FastMechanism)
     assert isinstance(make_mechanism(model, method), FastMechanism)

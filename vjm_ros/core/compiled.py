@@ -121,13 +121,9 @@ def make_mechanism(
     Raises
     ------
     ValueError
-        For an unknown ``kernel`` (the former ``"numpy"`` included), or ``"numba"`` without
-        numba installed.
+        For an unknown ``kernel``, or ``"numba"`` without numba installed (the settings refuse
+        the former ``"numpy"`` with an explanation: :mod:`vjm_ros.sim.settings`).
     """
-    if kernel == "numpy":
-        raise ValueError("kernel: 'numpy' is no longer a choice (the physics runs only in the "
-                         "compiled kernels, as plain Python where numba is missing); use 'auto' "
-                         "or 'numba'")
     if kernel not in KERNELS:
         raise ValueError(f"kernel: expected one of {', '.join(KERNELS)}, found {kernel!r}")
     if kernel == "numba" and not HAVE_NUMBA:
