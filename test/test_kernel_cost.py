@@ -1,4 +1,4 @@
-"""The kernel-cost study (studies.kernel_cost) runs end to end; its figures are benchmarks, not
+"""The kernel-cost study (benchmarks.kernel_cost) runs end to end; its figures are benchmarks, not
 asserted here beyond being positive and finite."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from vjm_ros.studies import kernel_cost
+from benchmarks import kernel_cost
 
 pytest.importorskip("numba")
 

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from vjm_ros.app import log_cost
-from vjm_ros.app.log_cost import LOG_COST_HEADING
+from benchmarks import log_cost
+from benchmarks.log_cost import LOG_COST_HEADING
 from vjm_ros.studies.pages import section, with_section
 
 PAGE = "# Title\n\nintro\n\n## First\n\none\n\n## Last\n\ntwo\n"

@@ -38,8 +38,8 @@ def test_live_loop_measures_commands_that_reached_the_node(capfd, monkeypatch):
     assumed), every per-tick topic arrived, and the machine's pacing floor ran before it."""
     import json
 
+    from benchmarks import live_loop
     from vjm_ros.jit import tiers
-    from vjm_ros.studies import live_loop
 
     # the study sets VJM_TIERED=0 for itself and its node: monkeypatch puts back what the
     # tests after this one had

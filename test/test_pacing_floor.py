@@ -1,4 +1,4 @@
-"""The pacing floor (studies.pacing_floor) counts a stall of the process as the node would.
+"""The pacing floor (benchmarks.pacing_floor) counts a stall of the process as the node would.
 
 On a fake clock the answer is known by hand: a tick released ``L`` ms after its deadline is
 followed by empty ticks that start at once, each one period (1 ms) less late, and a tick counts as
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from vjm_ros.studies import pacing_floor
+from benchmarks import pacing_floor
 
 
 class FakeTime:

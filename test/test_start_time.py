@@ -1,4 +1,4 @@
-"""The start-time study (studies.start_time) runs end to end; its figures are benchmarks, not
+"""The start-time study (benchmarks.start_time) runs end to end; its figures are benchmarks, not
 asserted here."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from vjm_ros.studies import start_time
+from benchmarks import start_time
 
 STAGES = ["import", "scene", "kernel", "simulator", "first_tick", "numba", "compiled"]
 

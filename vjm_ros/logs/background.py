@@ -70,7 +70,7 @@ _STOP = object()
 IN_CALLING_THREAD = False
 """Run the consumers in the calling thread, one after the other, at :meth:`BlockFanOut.put`
 (for profiling their cost without threads waiting for each other; see
-:func:`vjm_ros.app.log_cost.breakdown`)."""
+:func:`benchmarks.log_cost.breakdown`)."""
 
 
 class BlockFanOut:

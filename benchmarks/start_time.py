@@ -1,6 +1,6 @@
 """Start time of ``vjm run``, warm (numba's cache filled) and cold (empty cache), with a breakdown.
 
-``python -m vjm_ros.studies.start_time [--scene four_bar] [--repeats 5] [--json]
+``python -m benchmarks.start_time [--scene four_bar] [--repeats 5] [--json]
 [--docs docs/accuracy.md]`` measures in one run:
 
 1. **floor**: ``python -c pass``, the interpreter alone (median of ``repeats`` processes);
@@ -45,6 +45,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from benchmarks import ROOT
 from vjm_ros.studies.pages import with_section
 
 HEADING = "## Start time"
@@ -132,7 +133,7 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     loaded at the first call after the first tick).
 
     Stages, as ``vjm run`` goes: ``import`` (what it imports before it builds the simulator,
-    :mod:`vjm_ros.app.cli` itself aside: the studies do not import the app layer),
+    :mod:`vjm_ros.app.cli` itself aside),
     ``scene`` (the scene file to a model and settings), ``kernel`` (the compiled
     entry point :func:`vjm_ros.core.kernels.step` loaded from numba's cache or compiled, while the
     simulator is built; 0 where entry points start as plain Python: the kernel is then left to
@@ -193,8 +194,9 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
 
 def stages_in_process(scene: str, cache: str | None) -> tuple[dict[str, float], int]:
     """:func:`stages` in a fresh process with numba's cache in ``cache`` (None: the default)."""
-    done = subprocess.run([sys.executable, "-m", "vjm_ros.studies.start_time", "--stages", scene],
-                          env=_env(cache), capture_output=True, text=True, timeout=TIMEOUT)
+    done = subprocess.run([sys.executable, "-m", "benchmarks.start_time", "--stages", scene],
+                          env=_env(cache), cwd=ROOT, capture_output=True, text=True,
+                          timeout=TIMEOUT)
     if done.returncode != 0:
         raise RuntimeError(f"stages of {scene} failed: {done.stderr[-2000:]}")
     times, plain_ticks = json.loads(done.stdout.strip().splitlines()[-1])
@@ -258,7 +260,7 @@ def render_section(row: dict, when: str) -> str:
     lines = [
         HEADING,
         "",
-        f"Written by `python -m vjm_ros.studies.start_time --docs docs/accuracy.md` ({when}; "
+        f"Written by `python -m benchmarks.start_time --docs docs/accuracy.md` ({when}; "
         f"1-minute load average {row['load_1min']:.1f} on this shared machine: the figures vary "
         "2-4x with load, compare those of one run). Whole process of "
         f"`vjm run {row['scene']} --duration 0.001` (one control tick), median of "
@@ -306,7 +308,7 @@ def write_section(path: Path, section: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.start_time",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.start_time",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="four_bar")
     parser.add_argument("--repeats", type=int, default=5, help="warm runs (median)")

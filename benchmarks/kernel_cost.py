@@ -1,6 +1,6 @@
 """Cost of one evaluation of the compiled kernel (forward dynamics with its closures).
 
-``python -m vjm_ros.studies.kernel_cost [--scenes four_bar three_chain] [--steps 20000]
+``python -m benchmarks.kernel_cost [--scenes four_bar three_chain] [--steps 20000]
 [--repeats 15] [--json]`` times, for each scene, fixed steps in one compiled call
 (:meth:`~vjm_ros.core.mechanism.Mechanism.advance_fixed`: nothing observed or stored, no
 Python between the steps) and divides by the evaluations they make:
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.kernel_cost",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.kernel_cost",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=["four_bar", "three_chain"])
     parser.add_argument("--steps", type=int, default=20000, help="steps per timed call")

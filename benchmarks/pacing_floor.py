@@ -1,13 +1,13 @@
 """What this machine lets a 1 kHz loop keep: the node's pacer with nothing to do per tick.
 
-``python -m vjm_ros.studies.pacing_floor [--seconds 10] [--rate 1000] [--repeats 1]`` runs
+``python -m benchmarks.pacing_floor [--seconds 10] [--rate 1000] [--repeats 1]`` runs
 :class:`vjm_ros.realtime.pacing.Pacer`, the pacer of ``vjm_sim_node``, in realtime at normal
 priority with an empty tick, and counts its late and missed ticks as the node counts its own.
 Whatever such a loop misses, the node misses too, whatever its tick costs: a tick that starts a
 period or more after its deadline is missed (:mod:`vjm_ros.realtime.pacing`), and every tick after
 a stall of the process counts until the loop has caught up. On a machine that holds the process
 off its core for milliseconds at a time (a virtual machine on a busy host, for one), these stalls
-alone can exceed the live target of :mod:`vjm_ros.studies.live_loop` (at most 0.1 % of the
+alone can exceed the live target of :mod:`benchmarks.live_loop` (at most 0.1 % of the
 ticks missed); that study runs this loop before each of its scenes so that its figures can be
 read against the machine's.
 """
@@ -65,7 +65,7 @@ def describe(row: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line entry: measure and print one line per repeat (or JSON)."""
-    p = argparse.ArgumentParser(prog="python -m vjm_ros.studies.pacing_floor",
+    p = argparse.ArgumentParser(prog="python -m benchmarks.pacing_floor",
                                 description=__doc__.split("\n")[0])
     p.add_argument("--seconds", type=float, default=10.0, help="wall time per run, s (10)")
     p.add_argument("--rate", type=float, default=1000.0, help="ticks per second, Hz (1000)")

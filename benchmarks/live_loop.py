@@ -1,7 +1,7 @@
 """The node live at 1 kHz with a 1 kHz controller in the loop: missed ticks, command lag, commands
 applied.
 
-``python -m vjm_ros.studies.live_loop [--scenes ...] [--seconds 10]`` runs ``vjm_sim_node`` in
+``python -m benchmarks.live_loop [--scenes ...] [--seconds 10]`` runs ``vjm_sim_node`` in
 realtime at normal priority and, in this process, a controller that subscribes to every topic the
 node publishes and answers each ``/joint_states`` with an effort command. Each command carries a
 value of its own (on the first actuator, well inside its limit), so the first joint state whose
@@ -15,7 +15,7 @@ applied effort equals it tells when the command took effect:
   at least 95 %; a command overtaken by the next one before a tick latches it never shows).
 
 Right before each scene, the study runs the node's pacer with an empty tick for as long
-(:mod:`vjm_ros.studies.pacing_floor`, ``--floor-seconds``; 0 skips it): the ticks *it* misses
+(:mod:`benchmarks.pacing_floor`, ``--floor-seconds``; 0 skips it): the ticks *it* misses
 are the machine's, and no node can miss fewer on that machine at that time. Each row carries
 that floor (``floor_missed_share``, ``floor_max_lateness_ms``). The figures depend on the
 machine's load: compare within one run.
@@ -30,8 +30,8 @@ import threading
 
 import numpy as np
 
+from benchmarks import pacing_floor
 from vjm_ros.scene.loader import builtin_scenes, load_scene
-from vjm_ros.studies import pacing_floor
 from vjm_ros.studies.latency import node_command, run_node, take_applied
 
 RATE = 1000.0
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.live_loop",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.live_loop",
                                      description=__doc__.split("\n")[0])
     actuated = [s for s in builtin_scenes() if load_scene(s).model.actuators]
     parser.add_argument("--scenes", nargs="*", default=actuated)

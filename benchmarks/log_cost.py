@@ -1,6 +1,6 @@
 """What the logs of ``vjm run`` cost against the physics-only run of the same scene and settings.
 
-``python -m vjm_ros.app.log_cost [--scene four_bar] [--seconds 10] [--rounds 5]`` runs, in
+``python -m benchmarks.log_cost [--scene four_bar] [--seconds 10] [--rounds 5]`` runs, in
 this process and interleaved round by round, ``vjm run`` (the parsed command, without start-up and
 argument parsing) of one scene with rk4 at 1 kHz and exact closure:
 
@@ -177,7 +177,7 @@ def render_section(r: dict) -> str:
     verdict = "met" if ratio["all"] <= TARGET else "not met"
     lines = [
         LOG_COST_HEADING, "",
-        f"This section is written by `python -m vjm_ros.app.log_cost --rounds {r['rounds']} "
+        f"This section is written by `python -m benchmarks.log_cost --rounds {r['rounds']} "
         f"--parts --docs docs/accuracy.md` ({when}; {os.cpu_count()}-core {platform.machine()} "
         f"machine, Python {platform.python_version()}, numpy {np.__version__}); `vjm bench` "
         "keeps it when it rewrites the page.",
@@ -244,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    p = argparse.ArgumentParser(prog="python -m vjm_ros.app.log_cost", description=__doc__)
+    p = argparse.ArgumentParser(prog="python -m benchmarks.log_cost", description=__doc__)
     p.add_argument("--scene", default="four_bar")
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run")
     p.add_argument("--rounds", type=int, default=5, help="interleaved rounds (best is kept)")
