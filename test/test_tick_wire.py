@@ -22,16 +22,22 @@ from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import Simulator
 
 
-@pytest.mark.parametrize("scene_name", ["three_chain", "four_bar", "pendulum"])
-def test_refilled_bytes_read_back_as_fresh_messages_tick_after_tick(scene_name):
+def _running(scene_name: str):
+    """A scene's model, its simulator (default efforts applied), a :class:`TickWire` and the
+    rclpy layouts of the two ``Float64MultiArray`` messages."""
     scene = load_scene(scene_name)
     model = scene.model
     sim = Simulator(model, SimulationSettings(), scene.gains)
     if model.actuators:
         sim.set_efforts([a.effort for a in model.actuators])
-    wire = TickWire(model.joint_names, model.closure_names)
-    forces_layout = conv.labelled_layout(model.closure_names, len(conv.FORCE_COMPONENTS))
-    energy_layout = conv.labelled_layout(conv.ENERGY_LABELS, 1)
+    return (model, sim, TickWire(model.joint_names, model.closure_names),
+            conv.labelled_layout(model.closure_names, len(conv.FORCE_COMPONENTS)),
+            conv.labelled_layout(conv.ENERGY_LABELS, 1))
+
+
+@pytest.mark.parametrize("scene_name", ["three_chain", "four_bar", "pendulum"])
+def test_refilled_bytes_read_back_as_fresh_messages_tick_after_tick(scene_name):
+    model, sim, wire, forces_layout, energy_layout = _running(scene_name)
     for _ in range(5):
         sim.advance()
         s = sim.sample()
@@ -126,3 +132,78 @@ def test_tip_trace_keeps_the_last_positions_oldest_first():
     np.testing.assert_array_equal(trace.strips()[0][:, 1], [-2, -3, -4, -5])
     trace.add(_S(0.0, 7.0))  # a reset
     np.testing.assert_array_equal(trace.strips()[0][:, 0], [7, 7, 7, 7])
+
+
+def _same_but_padding(ours: bytes, theirs: bytes) -> bool:
+    """Equal length and equal bytes except in CDR padding: rclpy (Fast CDR) leaves its padding
+    uninitialized, so a byte may differ only where ours is a zero pad, a run of fewer than 8 bytes
+    that ends on a 4-aligned offset (counted from the end of the encapsulation header)."""
+    if len(ours) != len(theirs):
+        return False
+    i = 0
+    while i < len(ours):
+        if ours[i] == theirs[i]:
+            i += 1
+            continue
+        end = i + 1  # the differing run, then up to the next 4-aligned offset
+        while end < len(ours) and (ours[end] != theirs[end] or (end - 4) % 4):
+            end += 1
+        if (end - 4) % 4 or end - i >= 8 or any(ours[i:end]):
+            return False
+        i = end
+    return True
+
+
+@pytest.mark.parametrize("scene_name", ["three_chain", "pendulum"])
+def test_node_bytes_are_the_logs_bytes_rosbags_and_rclpy(scene_name):
+    """The node's per-tick bytes come from the logs' layouts: along a run they equal the logs'
+    encoders and rosbags' serializer byte for byte, and rclpy's ``serialize_message`` in every
+    byte but padding (the one difference from rosbags: an empty ``Float64MultiArray.data``,
+    which rclpy pads to 8 bytes)."""
+    from test_cdr_rosbags import TYPESTORE, build  # the test's own rosbags message builder
+
+    from vjm_ros.logs import cdr, messages
+
+    def rosbags(type_name, value):
+        return bytes(TYPESTORE.serialize_cdr(build(type_name, value), type_name))
+
+    model, sim, wire, forces_layout, energy_layout = _running(scene_name)
+    for tick in range(5):
+        sim.advance()
+        s = sim.sample()
+        t = s.t + 1e-4 + 4.3 * tick  # stamps past 2**32 ns too
+        ns = messages.seconds_to_ns(t)
+        logs = [
+            (wire.joint_state(t, s.q, s.qd, s.effort),
+             cdr.joint_state_encoder(model.joint_names)(ns, s.q, s.qd, s.effort),
+             rosbags(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns)),
+             conv.joint_state(model.joint_names, t, s.q, s.qd, s.effort)),
+            (wire.energy_values(s.energy),
+             cdr.multi_array_encoder(messages.labelled_layout(messages.ENERGY_LABELS, 1), 4)(
+                 s.energy),
+             rosbags(messages.FLOAT64_MULTI_ARRAY, messages.energy(s)),
+             conv.energy(energy_layout, s.energy)),
+            (wire.clock_at(t), cdr.encode_clock(ns), rosbags(messages.CLOCK, messages.clock(ns)),
+             conv.clock(t)),
+        ]
+        logs += [(wire.wrench(i, force, t), cdr.wrench_stamped_encoder()(ns, *force),
+                  rosbags(messages.WRENCH_STAMPED, messages.wrench(s, i, ns)),
+                  conv.wrench(force, t)) for i, force in enumerate(s.closure_force)]
+        for raw, log, theirs, fresh in logs:
+            assert raw == log == theirs, type(fresh).__name__
+            assert _same_but_padding(raw, serialize_message(fresh)), type(fresh).__name__
+        raw = wire.constraint_forces(s.closure_force)
+        theirs = rosbags(messages.FLOAT64_MULTI_ARRAY,
+                         messages.constraint_forces(model.closure_names, s))
+        assert raw == (theirs if len(model.closures) else theirs + bytes(4))
+        assert _same_but_padding(
+            raw, serialize_message(conv.constraint_forces(forces_layout, s.closure_force)))
+
+
+def test_padding_check_tells_padding_from_data():
+    """The helper above accepts differences in pad bytes only."""
+    ours = bytes([0, 1, 0, 0, 5, 0, 0, 0, 9, 9, 9, 9])
+    assert _same_but_padding(ours, ours[:5] + b"\x07\x08\x09" + ours[8:])
+    assert not _same_but_padding(ours, ours[:4] + b"\x06" + ours[5:])  # a data byte
+    assert not _same_but_padding(ours, ours[:8] + b"\x00" + ours[9:])  # a nonzero byte of ours
+    assert not _same_but_padding(ours, ours[:-1])

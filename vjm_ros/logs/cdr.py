@@ -1,18 +1,21 @@
-"""CDR (XCDR1, little endian) encoding of the messages the logs carry.
+"""CDR (XCDR1, little endian) encoding of the messages the logs and the node carry.
 
 :func:`encode` serializes any message dict of :mod:`vjm_ros.logs.messages` with rosbags'
-schema-driven serializer (the ROS 2 Kilted definitions of :mod:`vjm_ros.logs.msgdefs`). The
-messages of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchStamped`` and
-``Clock``) have fixed-layout fast paths: their constant bytes (header frame, joint names, array
-layout) come from a rosbags serialization once, and only the stamp and the numbers are packed per
-message. The markers (every tenth tick) keep a hand-written encoder
-(:func:`encode_markers`). Measured here in one run (``pytest -m bench test/bench_logging.py``):
-a JointState of three joints costs 1.7 us on its fast path against 12-14 us through rosbags from
-the dict, a WrenchStamped 0.4 us against 12-17 us, the four-bar's MarkerArray 29 us against
-140-155 us. test/test_cdr_rosbags.py checks every fast path against rosbags byte for byte. CDR layout, for reading the code: every primitive is aligned to its size,
-counted from the end of the 4-byte encapsulation header; strings are a ``uint32`` length that
-counts the terminating NUL, then the bytes and the NUL; sequences are a ``uint32`` count, then the
-elements.
+schema-driven serializer (the ROS 2 Kilted definitions of :mod:`vjm_ros.logs.msgdefs`). Each
+message of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchStamped``,
+``Clock`` and the decimated ``MarkerArray``) has one byte layout here, a :class:`FixedLayout`
+written by :class:`CdrWriter`: its bytes with zero stamps and numbers and the offsets of both.
+The node refills a copy of it in place (:class:`vjm_ros.ros.wire.TickWire`,
+:class:`vjm_ros.ros.wire.MarkerWire`, published as bytes), the recorder packs one message
+(:meth:`FixedLayout.pack`, behind :func:`joint_state_encoder` and its siblings) or a whole
+block (:mod:`vjm_ros.logs.mcap_block`). Measured here in one run
+(``pytest -m bench test/bench_logging.py``): a JointState of three joints costs 1.7 us on its
+fast path against 12-14 us through rosbags from the dict, a WrenchStamped 0.4 us against
+12-17 us, the four-bar's MarkerArray 29 us against 140-155 us. test/test_cdr_rosbags.py checks
+every layout against rosbags and rclpy byte for byte. CDR layout, for reading the code: every
+primitive is aligned to its size, counted from the end of the 4-byte encapsulation header;
+strings are a ``uint32`` length that counts the terminating NUL, then the bytes and the NUL;
+sequences are a ``uint32`` count, then the elements.
 """
 
 from __future__ import annotations
@@ -223,172 +226,32 @@ def encode_markers(message: dict) -> bytes:
     return w.getvalue()
 
 
-# ---------------------------------------------------------------- fixed-layout fast paths
-class _Tail:
-    """A ``struct`` format for the variable fields after a constant prefix of ``start`` bytes."""
-
-    def __init__(self, start: int):
-        self.fmt = "<"
-        self.off = start
-        self.arrays: list[tuple[int, int]] = []  # (offset in the message, count) per float64 run
-
-    def align(self, size: int) -> None:
-        pad = -self.off % size
-        if pad:
-            self.fmt += f"{pad}x"
-            self.off += pad
-
-    def uint32(self) -> None:
-        self.align(4)
-        self.fmt += "I"
-        self.off += 4
-
-    def float64s(self, count: int) -> None:
-        if count:
-            self.align(8)
-            self.arrays.append((self.off + len(_ENCAPSULATION), count))
-            self.fmt += f"{count}d"
-            self.off += 8 * count
-
-    def struct(self) -> struct.Struct:
-        return struct.Struct(self.fmt)
-
-
-def _stamp_parts(ns: int) -> tuple[int, int]:
-    sec, nanosec = divmod(int(ns), 1_000_000_000)
-    return sec, nanosec
-
-
-_STAMP = struct.Struct("<iI").pack
-
-
-def _after_stamp(frame_id: str) -> bytes:
-    """Bytes of a header after its stamp: the ``frame_id`` string (the stamp is 8 aligned bytes)."""
-    return encode("std_msgs/msg/String", {"data": frame_id})[4:]
-
-
-def _joint_state_parts(names: Sequence[str], frame_id: str) -> tuple[bytes, _Tail]:
-    """Constant bytes of a JointState after its stamp, and the layout of its three arrays."""
-    empty = encode("sensor_msgs/msg/JointState", {
-        "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": frame_id},
-        "name": list(names), "position": [], "velocity": [], "effort": [],
-    })
-    middle = empty[12:-12]  # after encapsulation and stamp, before the three empty sequences
-    tail = _Tail(len(empty) - 12 - 4)
-    for _ in range(3):
-        tail.uint32()
-        tail.float64s(len(names))
-    return middle, tail
-
-
-def joint_state_encoder(
-    names: Sequence[str], frame_id: str = "world"
-) -> Callable[[int, np.ndarray, np.ndarray, np.ndarray], bytes]:
-    """Encoder of ``sensor_msgs/JointState`` messages for a fixed list of joints.
-
-    Parameters
-    ----------
-    names : sequence of str
-        Joint names (their number fixes the array lengths).
-    frame_id : str
-
-    Returns
-    -------
-    callable
-        ``f(ns, position, velocity, effort) -> bytes`` with arrays of shape (len(names),); the
-        result equals :func:`encode` of the corresponding dict.
-    """
-    middle, tail = _joint_state_parts(names, frame_id)
-    n = len(names)
-    pack = tail.struct().pack
-
-    def encode_joint_state(ns: int, position, velocity, effort) -> bytes:
-        return b"".join(
-            (
-                _ENCAPSULATION,
-                _STAMP(*_stamp_parts(ns)),
-                middle,
-                pack(n, *position, n, *velocity, n, *effort),
-            )
-        )
-
-    return encode_joint_state
-
-
-def _multi_array_parts(layout: dict, size: int) -> tuple[bytes, _Tail]:
-    """Constant bytes of a Float64MultiArray before its data, and the layout of the data."""
-    prefix = encode("std_msgs/msg/Float64MultiArray", {"layout": layout, "data": []})[:-4]
-    tail = _Tail(len(prefix) - 4)
-    tail.uint32()
-    tail.float64s(size)
-    return prefix, tail
-
-
-def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes]:
-    """Encoder of ``std_msgs/Float64MultiArray`` messages with a fixed layout and length.
-
-    Parameters
-    ----------
-    layout : dict
-        ``std_msgs/MultiArrayLayout``.
-    size : int
-        Number of values.
-
-    Returns
-    -------
-    callable
-        ``f(data) -> bytes`` with ``data`` of shape (size,).
-    """
-    prefix, tail = _multi_array_parts(layout, size)
-    pack = tail.struct().pack
-
-    def encode_multi_array(data) -> bytes:
-        return prefix + pack(size, *data)
-
-    return encode_multi_array
-
-
-def _wrench_parts(frame_id: str) -> tuple[bytes, _Tail]:
-    """Constant bytes of a WrenchStamped after its stamp, and the layout of its six doubles."""
-    middle = _after_stamp(frame_id)
-    tail = _Tail(8 + len(middle))
-    tail.float64s(6)
-    return middle, tail
-
-
-def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, float, float], bytes]:
-    """Encoder of planar ``geometry_msgs/WrenchStamped`` messages.
-
-    Returns
-    -------
-    callable
-        ``f(ns, fx, fy, mz) -> bytes``: force ``(fx, fy, 0)`` N, torque ``(0, 0, mz)`` N m.
-    """
-    middle, tail = _wrench_parts(frame_id)
-    pack = tail.struct().pack
-
-    def encode_wrench(ns: int, fx: float, fy: float, mz: float) -> bytes:
-        return b"".join(
-            (_ENCAPSULATION, _STAMP(*_stamp_parts(ns)), middle, pack(fx, fy, 0.0, 0.0, 0.0, mz))
-        )
-
-    return encode_wrench
-
-
-def encode_clock(ns: int) -> bytes:
-    """``rosgraph_msgs/Clock`` at ``ns`` nanoseconds."""
-    return _ENCAPSULATION + _STAMP(*_stamp_parts(ns))
-
-
-# ---------------------------------------------------------------- byte images for blocks
+# ---------------------------------------------------------------- fixed layouts
 STAMP_OFFSET = len(_ENCAPSULATION)
 """Byte offset of the header stamp (``int32`` sec, ``uint32`` nanosec) in a stamped message."""
+_STAMP = struct.Struct("<iI")
+_DOUBLES: dict[int, struct.Struct] = {}
+
+
+def _doubles(count: int) -> struct.Struct:
+    """``struct`` of ``count`` little-endian doubles (cached)."""
+    packer = _DOUBLES.get(count)
+    if packer is None:
+        packer = _DOUBLES[count] = struct.Struct(f"<{count}d")
+    return packer
+
+
+def stamp_parts(ns: int) -> tuple[int, int]:
+    """``(sec, nanosec)`` of a stamp at ``ns`` nanoseconds."""
+    return divmod(int(ns), 1_000_000_000)
 
 
 @dataclass(frozen=True)
 class FixedLayout:
-    """Byte image of a fixed-layout message: its bytes with zero stamps and numbers, and where
-    the numbers go, so that many messages can be written into copies of the image at once.
+    """The one byte layout of a per-tick message: its bytes with zero stamps and numbers, and
+    where the stamps and numbers go. The node refills a copy in place
+    (:class:`vjm_ros.ros.wire.TickWire`), the logs pack one message (:meth:`pack`) or many at once
+    (:mod:`vjm_ros.logs.mcap_block`).
 
     Attributes
     ----------
@@ -406,32 +269,135 @@ class FixedLayout:
     stamps: tuple[int, ...]
     arrays: tuple[tuple[int, int], ...]
 
+    def pack(self, ns: int, *runs: Sequence[float]) -> bytes:
+        """The message stamped ``ns`` (ns) holding ``runs`` (one sequence of floats per entry of
+        :attr:`arrays`, of its count)."""
+        buf = bytearray(self.template)
+        if self.stamps:
+            sec, nanosec = stamp_parts(ns)
+            for at in self.stamps:
+                _STAMP.pack_into(buf, at, sec, nanosec)
+        for (offset, count), values in zip(self.arrays, runs, strict=True):
+            _doubles(count).pack_into(buf, offset, *values)
+        return bytes(buf)
+
+
+def _stamped(w: CdrWriter, frame_id: str) -> list[int]:
+    """Write a ``std_msgs/Header`` stamped 0; the offset of its stamp, as a list."""
+    _header(w, {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": frame_id})
+    return [STAMP_OFFSET]
+
+
+def _float64_run(w: CdrWriter, count: int, arrays: list[tuple[int, int]],
+                 align_empty: bool = False) -> None:
+    """Write ``count`` zero doubles; note ``(offset, count)`` in ``arrays`` if any. An empty run
+    is aligned only with ``align_empty`` (see :func:`multi_array_layout`)."""
+    if count or align_empty:
+        w.align(8)
+    if count:
+        arrays.append((len(w.buf), count))
+        w.buf += bytes(8 * count)
+
 
 def joint_state_layout(names: Sequence[str], frame_id: str = "world") -> FixedLayout:
-    """:class:`FixedLayout` of :func:`joint_state_encoder`: position, velocity, effort runs."""
-    _, tail = _joint_state_parts(names, frame_id)
-    z = [0.0] * len(names)
-    template = joint_state_encoder(names, frame_id)(0, z, z, z)
-    return FixedLayout(template, (STAMP_OFFSET,), tuple(tail.arrays))
+    """``sensor_msgs/JointState`` for a fixed list of joints: runs position, velocity, effort
+    (``len(names)`` each)."""
+    w, arrays = CdrWriter(), []
+    stamps = _stamped(w, frame_id)
+    w.uint32(len(names))
+    for name in names:
+        w.string(name)
+    for _ in range(3):
+        w.uint32(len(names))
+        _float64_run(w, len(names), arrays)
+    return FixedLayout(w.getvalue(), tuple(stamps), tuple(arrays))
 
 
-def multi_array_layout(layout: dict, size: int) -> FixedLayout:
-    """:class:`FixedLayout` of :func:`multi_array_encoder`: one run of ``size`` values."""
-    _, tail = _multi_array_parts(layout, size)
-    return FixedLayout(multi_array_encoder(layout, size)([0.0] * size), (), tuple(tail.arrays))
+def multi_array_layout(layout: dict, size: int, align_empty: bool = False) -> FixedLayout:
+    """``std_msgs/Float64MultiArray`` with the ``std_msgs/MultiArrayLayout`` ``layout``: one run
+    of ``size`` values.
+
+    With ``size`` 0 and ``align_empty``, the empty ``data`` is padded to 8 bytes as rclpy's
+    serializer (Fast CDR) writes it; rosbags, and so the logs, do not pad it. Either reads
+    back as the same message in both.
+    """
+    w, arrays = CdrWriter(), []
+    w.uint32(len(layout["dim"]))
+    for dim in layout["dim"]:
+        w.string(dim["label"])
+        w.uint32(dim["size"])
+        w.uint32(dim["stride"])
+    w.uint32(layout["data_offset"])
+    w.uint32(size)
+    _float64_run(w, size, arrays, align_empty)
+    return FixedLayout(w.getvalue(), (), tuple(arrays))
 
 
 def wrench_stamped_layout(frame_id: str = "world") -> FixedLayout:
-    """:class:`FixedLayout` of :func:`wrench_stamped_encoder`: runs ``(fx, fy)`` and ``(mz,)``
+    """Planar ``geometry_msgs/WrenchStamped``: runs ``(force.x, force.y)`` and ``(torque.z,)``
     (the zero ``force.z`` and ``torque.x, y`` between them stay as in the template)."""
-    _, tail = _wrench_parts(frame_id)
-    ((offset, _),) = tail.arrays
-    template = wrench_stamped_encoder(frame_id)(0, 0.0, 0.0, 0.0)
-    return FixedLayout(template, (STAMP_OFFSET,), ((offset, 2), (offset + 5 * 8, 1)))
+    w, arrays = CdrWriter(), []
+    stamps = _stamped(w, frame_id)
+    _float64_run(w, 6, arrays)
+    ((offset, _),) = arrays
+    return FixedLayout(w.getvalue(), tuple(stamps), ((offset, 2), (offset + 5 * 8, 1)))
 
 
-CLOCK_LAYOUT = FixedLayout(encode_clock(0), (STAMP_OFFSET,), ())
-""":class:`FixedLayout` of :func:`encode_clock`."""
+CLOCK_LAYOUT = FixedLayout(_ENCAPSULATION + bytes(8), (STAMP_OFFSET,), ())
+"""``rosgraph_msgs/Clock``: its stamp only."""
+
+
+def joint_state_encoder(
+    names: Sequence[str], frame_id: str = "world"
+) -> Callable[[int, np.ndarray, np.ndarray, np.ndarray], bytes]:
+    """Encoder of ``sensor_msgs/JointState`` messages for a fixed list of joints
+    (:func:`joint_state_layout`).
+
+    Parameters
+    ----------
+    names : sequence of str
+        Joint names (their number fixes the array lengths).
+    frame_id : str
+
+    Returns
+    -------
+    callable
+        ``f(ns, position, velocity, effort) -> bytes`` with arrays of shape (len(names),); the
+        result equals :func:`encode` of the corresponding dict.
+    """
+    return joint_state_layout(names, frame_id).pack
+
+
+def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes]:
+    """Encoder of ``std_msgs/Float64MultiArray`` messages with a fixed layout and length
+    (:func:`multi_array_layout`).
+
+    Returns
+    -------
+    callable
+        ``f(data) -> bytes`` with ``data`` of shape (size,).
+    """
+    pack = multi_array_layout(layout, size).pack
+    if not size:
+        return lambda data: pack(0)
+    return lambda data: pack(0, data)
+
+
+def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, float, float], bytes]:
+    """Encoder of planar ``geometry_msgs/WrenchStamped`` messages (:func:`wrench_stamped_layout`).
+
+    Returns
+    -------
+    callable
+        ``f(ns, fx, fy, mz) -> bytes``: force ``(fx, fy, 0)`` N, torque ``(0, 0, mz)`` N m.
+    """
+    pack = wrench_stamped_layout(frame_id).pack
+    return lambda ns, fx, fy, mz: pack(ns, (fx, fy), (mz,))
+
+
+def encode_clock(ns: int) -> bytes:
+    """``rosgraph_msgs/Clock`` at ``ns`` nanoseconds (:data:`CLOCK_LAYOUT`)."""
+    return CLOCK_LAYOUT.pack(ns)
 
 
 def markers_layout(message: dict) -> FixedLayout:

@@ -1,7 +1,8 @@
 """Conversions between ROS 2 messages and arrays (message types only; rclpy is not started).
 
-The per-tick messages are built field by field for speed; their layouts are those of
-:mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
+The per-tick messages as rclpy message objects (the floor of :mod:`vjm_ros.ros.bare_publish` and
+the tests' oracle; the node publishes their bytes, :mod:`vjm_ros.ros.wire`); their layouts are
+those of :mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
 
 * ``/joint_states``: every joint in scene order; position (rad or m), velocity (rad/s or m/s),
   effort = the applied generalized effort (N m or N; zero on passive joints);
@@ -74,7 +75,11 @@ def joint_state(
     msg = JointState()
     msg.header.frame_id = FRAME_ID
     msg.name = list(names)
-    return _fill_joint_state(msg, t, q, qd, effort)
+    _set_stamp(msg.header.stamp, t)
+    msg.position = _doubles(q)
+    msg.velocity = _doubles(qd)
+    msg.effort = _doubles(effort)
+    return msg
 
 
 def labelled_layout(labels: Sequence[str], size: int) -> MultiArrayLayout:
@@ -95,9 +100,7 @@ def constraint_forces(layout: MultiArrayLayout, forces: np.ndarray) -> Float64Mu
     forces : ndarray, shape (k, 3)
         ``(fx, fy, mz)`` per closure, N, N, N m.
     """
-    msg = Float64MultiArray(layout=layout)
-    _fill_doubles(msg, forces.reshape(-1))
-    return msg
+    return Float64MultiArray(layout=layout, data=_doubles(forces.reshape(-1)))
 
 
 def energy(layout: MultiArrayLayout, values: np.ndarray) -> Float64MultiArray:
@@ -109,9 +112,7 @@ def energy(layout: MultiArrayLayout, values: np.ndarray) -> Float64MultiArray:
         ``labelled_layout(ENERGY_LABELS, 1)``.
     values : ndarray, shape (4,)
     """
-    msg = Float64MultiArray(layout=layout)
-    _fill_doubles(msg, values)
-    return msg
+    return Float64MultiArray(layout=layout, data=_doubles(values))
 
 
 ENERGY_LABELS = layouts.ENERGY_LABELS
@@ -130,7 +131,11 @@ def wrench(force: np.ndarray, t: float) -> WrenchStamped:
     """
     msg = WrenchStamped()
     msg.header.frame_id = FRAME_ID
-    return _fill_wrench(msg, force, t)
+    _set_stamp(msg.header.stamp, t)
+    msg.wrench.force.x = float(force[0])
+    msg.wrench.force.y = float(force[1])
+    msg.wrench.torque.z = float(force[2])
+    return msg
 
 
 def clock(t: float) -> Clock:
@@ -142,116 +147,6 @@ def clock(t: float) -> Clock:
 
 def _set_stamp(msg_stamp: Time, t: float) -> None:
     msg_stamp.sec, msg_stamp.nanosec = divmod(layouts.seconds_to_ns(t), 1_000_000_000)
-
-
-def _fill_joint_state(msg: JointState, t: float, q: np.ndarray, qd: np.ndarray,
-                      effort: np.ndarray) -> JointState:
-    _set_stamp(msg.header.stamp, t)
-    msg.position = _doubles(q)
-    msg.velocity = _doubles(qd)
-    msg.effort = _doubles(effort)
-    return msg
-
-
-def _fill_doubles(msg: Float64MultiArray, values: np.ndarray) -> Float64MultiArray:
-    msg.data = _doubles(values)
-    return msg
-
-
-def _fill_wrench(msg: WrenchStamped, force: np.ndarray, t: float) -> WrenchStamped:
-    _set_stamp(msg.header.stamp, t)
-    msg.wrench.force.x = float(force[0])
-    msg.wrench.force.y = float(force[1])
-    msg.wrench.torque.z = float(force[2])
-    return msg
-
-
-class TickMessages:
-    """The per-tick messages, built once and refilled every tick.
-
-    rclpy serializes a message when it is published, so one instance per topic can be refilled
-    and published again. The refill allocates nothing: every header and ``/clock`` share one
-    ``builtin_interfaces/Time`` (set once per simulated time), and the float arrays of the
-    messages are ``array.array`` objects written through numpy views (a message keeps the
-    ``array.array`` it is given). Each ``fill`` method returns the message with the same content
-    as the function of the same name (:func:`joint_state`, :func:`constraint_forces`,
-    :func:`energy`, :func:`wrench`, :func:`clock`), which build a fresh message.
-
-    Parameters
-    ----------
-    joint_names : sequence of str
-        ``Model.joint_names``.
-    closure_names : sequence of str
-        ``Model.closure_names``.
-    """
-
-    def __init__(self, joint_names: Sequence[str], closure_names: Sequence[str]):
-        n, k = len(joint_names), len(closure_names)
-        self.stamp = Time()
-        self._ns: int | None = None
-        self.joint = JointState()
-        self.joint.header.frame_id = FRAME_ID
-        self.joint.header.stamp = self.stamp
-        self.joint.name = list(joint_names)
-        self._q, self._qd, self._effort = (
-            _storage(self.joint, field, n) for field in ("position", "velocity", "effort"))
-        self.forces = Float64MultiArray(
-            layout=labelled_layout(closure_names, len(FORCE_COMPONENTS)))
-        self._forces = _storage(self.forces, "data", k * len(FORCE_COMPONENTS)).reshape(
-            k, len(FORCE_COMPONENTS))
-        self.energy = Float64MultiArray(layout=labelled_layout(ENERGY_LABELS, 1))
-        self._energy = _storage(self.energy, "data", len(ENERGY_LABELS))
-        self.wrenches = [WrenchStamped() for _ in closure_names]
-        for w in self.wrenches:
-            w.header.frame_id = FRAME_ID
-            w.header.stamp = self.stamp
-        self._wrench_parts = [(w.wrench.force, w.wrench.torque) for w in self.wrenches]
-        self.clock = Clock()
-        self.clock.clock = self.stamp
-
-    def set_time(self, t: float) -> None:
-        """Stamp every message with simulated time ``t``, s (rounded to the nanosecond)."""
-        ns = layouts.seconds_to_ns(t)
-        if ns != self._ns:
-            self._ns = ns
-            self.stamp.sec, self.stamp.nanosec = divmod(ns, 1_000_000_000)
-
-    def fill_joint_state(self, t: float, q: np.ndarray, qd: np.ndarray,
-                         effort: np.ndarray) -> JointState:
-        """As :func:`joint_state` (t in s; q, qd, effort shape (n,))."""
-        self.set_time(t)
-        self._q[:] = q
-        self._qd[:] = qd
-        self._effort[:] = effort
-        return self.joint
-
-    def fill_constraint_forces(self, forces: np.ndarray) -> Float64MultiArray:
-        """As :func:`constraint_forces` (forces shape (k, 3))."""
-        self._forces[:] = forces
-        return self.forces
-
-    def fill_energy(self, values: np.ndarray) -> Float64MultiArray:
-        """As :func:`energy` (values shape (4,), J)."""
-        self._energy[:] = values
-        return self.energy
-
-    def fill_wrench(self, index: int, force: np.ndarray, t: float) -> WrenchStamped:
-        """As :func:`wrench` for closure ``index``."""
-        self.set_time(t)
-        linear, torque = self._wrench_parts[index]
-        linear.x, linear.y, torque.z = force.tolist()
-        return self.wrenches[index]
-
-    def fill_clock(self, t: float) -> Clock:
-        """As :func:`clock`."""
-        self.set_time(t)
-        return self.clock
-
-
-def _storage(msg, field: str, size: int) -> np.ndarray:
-    """Give ``msg.<field>`` a zeroed ``array.array`` of ``size`` doubles; a numpy view of it."""
-    setattr(msg, field, array.array("d", bytes(8 * size)))
-    return np.frombuffer(getattr(msg, field), dtype=float)
 
 
 def wrench_topic(closure: str) -> str:

@@ -6,74 +6,44 @@ another process, 5 per-tick messages took 34-41 µs here against 21-24 µs for t
 published with ``publish(bytes)`` (measured in one run on five_bar). :class:`TickWire` keeps one
 serialized message per per-tick topic and writes only what changes from tick to tick (the stamp
 and the numbers) into it at fixed offsets; everything else (frame, joint names, array layout)
-stays as rclpy's own serializer wrote it.
+stays as written once.
 
-The templates and offsets come from rclpy itself: each message is filled through
-:class:`~vjm_ros.ros.conversions.TickMessages` with sentinel values and serialized with
-``rclpy.serialization.serialize_message``; the offsets are where the sentinels' bytes are. At
-construction every buffer is filled with test values and compared byte for byte with rclpy's
-serialization of the same message: same length, and read back by rclpy's deserializer, the same
-message (:class:`WireLayoutError` otherwise; padding bytes are left out of the comparison, rclpy
-leaves them uninitialized). A layout this module does not understand is refused rather than
-published wrong.
+The bytes and offsets are the messages' one layout, :class:`vjm_ros.logs.cdr.FixedLayout`, which
+the logs write too; test/test_cdr_rosbags.py checks it against rosbags' and rclpy's serializers
+byte for byte, and test/test_tick_wire.py reads the refilled bytes back with rclpy.
 """
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Sequence
 
 import numpy as np
-from rclpy.serialization import deserialize_message, serialize_message
 
 from vjm_ros.logs import cdr
 from vjm_ros.logs import messages as layouts
-from vjm_ros.ros.conversions import TickMessages
 
-STAMP_OFFSET = 4
+STAMP_OFFSET = cdr.STAMP_OFFSET
 """Offset of the first header's stamp (``int32 sec``, ``uint32 nanosec``) in every per-tick
 message: right after the 4-byte encapsulation header, since the header (or, in ``Clock``, the
 stamp itself) is the first field."""
-_STAMP = struct.Struct("<iI")
-
-
-class WireLayoutError(RuntimeError):
-    """rclpy serializes a per-tick message in a layout :class:`TickWire` cannot refill."""
+_STAMP = cdr._STAMP
 
 
 class _Buffer:
-    """One serialized message: its bytes and numpy views of its number fields."""
+    """One serialized message, a copy of its layout's template, and numpy views of its runs."""
 
-    def __init__(self, template: bytes):
-        self.data = bytearray(template)
-
-    def view(self, offset: int, count: int) -> np.ndarray:
-        """Writable float64 view of ``count`` doubles at ``offset`` (CDR little endian)."""
-        return np.frombuffer(self.data, dtype="<f8", count=count, offset=offset)
-
-    def find(self, values: Sequence[float]) -> int:
-        """Offset of the packed doubles ``values`` (sentinels), which must occur exactly once."""
-        packed = np.asarray(values, dtype="<f8").tobytes()
-        if not packed:
-            return 0  # nothing to refill (a scene without closures)
-        at = self.data.find(packed)
-        if at < 0 or self.data.find(packed, at + 1) >= 0:
-            raise WireLayoutError("a per-tick message's numbers are not where expected")
-        return at
-
-
-def _sentinels(count: int, first: int) -> np.ndarray:
-    """Distinct doubles that occur nowhere else in a message (not round, not small integers)."""
-    return np.pi * 1e7 + np.arange(first, first + count) * np.e
+    def __init__(self, layout: cdr.FixedLayout):
+        self.data = bytearray(layout.template)
+        self.runs = [np.frombuffer(self.data, dtype="<f8", count=count, offset=offset)
+                     for offset, count in layout.arrays]
 
 
 class TickWire:
     """Serialized per-tick messages, refilled in place.
 
-    Each per-tick message is serialized once by rclpy (from :class:`~.conversions.TickMessages`)
-    with distinct marker values, which locate its numbers in the bytes; each tick writes the new
-    numbers there through numpy views and the node publishes the bytes as they are. The
-    constructor checks the refill against rclpy's own serialization of test values.
+    Each per-tick message starts as its layout's template (:mod:`vjm_ros.logs.cdr`); each tick
+    writes the new stamp and numbers at the layout's offsets through numpy views and the node
+    publishes the bytes as they are.
 
     Parameters
     ----------
@@ -81,59 +51,27 @@ class TickWire:
         ``Model.joint_names``.
     closure_names : sequence of str
         ``Model.closure_names``.
-
-    Raises
-    ------
-    WireLayoutError
-        rclpy's serialization of a message differs from this class's refill of it.
     """
 
     def __init__(self, joint_names: Sequence[str], closure_names: Sequence[str]):
-        n, k = len(joint_names), len(closure_names)
-        m = TickMessages(joint_names, closure_names)
-        q, qd, effort = _sentinels(n, 0), _sentinels(n, n), _sentinels(n, 2 * n)
-        self.joint = _Buffer(serialize_message(m.fill_joint_state(0.0, q, qd, effort)))
-        self._q = self.joint.view(self.joint.find(q), n)
-        self._qd = self.joint.view(self.joint.find(qd), n)
-        self._effort = self.joint.view(self.joint.find(effort), n)
-        forces = _sentinels(3 * k, 3 * n).reshape(k, 3)
-        self.forces = _Buffer(serialize_message(m.fill_constraint_forces(forces)))
-        self._forces = self.forces.view(self.forces.find(forces.reshape(-1)), 3 * k).reshape(k, 3)
-        energy = _sentinels(4, 3 * n + 3 * k)
-        self.energy = _Buffer(serialize_message(m.fill_energy(energy)))
-        self._energy = self.energy.view(self.energy.find(energy), 4)
-        self.wrenches, self._linear, self._torque = [], [], []
-        for i, force in enumerate(forces):
-            w = _Buffer(serialize_message(m.fill_wrench(i, force, 0.0)))
-            self.wrenches.append(w)
-            self._linear.append(w.view(w.find(force[:2]), 2))
-            self._torque.append(w.view(w.find(force[2:]), 1))
-        self.clock = _Buffer(serialize_message(m.fill_clock(0.0)))
+        k = len(closure_names)
+        self.joint = _Buffer(cdr.joint_state_layout(joint_names, layouts.FRAME_ID))
+        self._q, self._qd, self._effort = self.joint.runs
+        self.forces = _Buffer(cdr.multi_array_layout(
+            layouts.labelled_layout(closure_names, len(layouts.FORCE_COMPONENTS)),
+            len(layouts.FORCE_COMPONENTS) * k, align_empty=True))  # rclpy's bytes
+        self._forces = (self.forces.runs[0] if k else np.zeros(0)).reshape(
+            k, len(layouts.FORCE_COMPONENTS))
+        self.energy = _Buffer(cdr.multi_array_layout(
+            layouts.labelled_layout(layouts.ENERGY_LABELS, 1), len(layouts.ENERGY_LABELS)))
+        (self._energy,) = self.energy.runs
+        wrench = cdr.wrench_stamped_layout(layouts.FRAME_ID)
+        self.wrenches = [_Buffer(wrench) for _ in closure_names]
+        self._linear = [w.runs[0] for w in self.wrenches]
+        self._torque = [w.runs[1] for w in self.wrenches]
+        self.clock = _Buffer(cdr.CLOCK_LAYOUT)
         self._stamped = [self.joint, *self.wrenches, self.clock]
         self._ns: int | None = None
-        self._check(m, n, k)
-
-    def _check(self, m: TickMessages, n: int, k: int) -> None:
-        """Refill with test values and compare with rclpy's serialization of the same."""
-        rng = np.random.default_rng(7)
-        t = 1234.5678901
-        q, qd, effort, energy = (rng.normal(size=n), rng.normal(size=n), rng.normal(size=n),
-                                 rng.normal(size=4))
-        forces = rng.normal(size=(k, 3))
-        pairs = [(self.joint_state(t, q, qd, effort), m.fill_joint_state(t, q, qd, effort)),
-                 (self.constraint_forces(forces), m.fill_constraint_forces(forces)),
-                 (self.energy_values(energy), m.fill_energy(energy)),
-                 (self.clock_at(t), m.fill_clock(t))]
-        pairs += [(self.wrench(i, forces[i], t), m.fill_wrench(i, forces[i], t))
-                  for i in range(k)]
-        for raw, msg in pairs:
-            # padding bytes are not part of the contract (rclpy leaves them uninitialized):
-            # same length, and the same message when read back
-            if (len(raw) != len(serialize_message(msg))
-                    or deserialize_message(raw, type(msg)) != msg):
-                raise WireLayoutError(
-                    f"{type(msg).__name__}: refilled bytes do not read back as rclpy's message")
-        self._ns = None
 
     def set_time(self, t: float) -> None:
         """Stamp every message with simulated time ``t``, s (rounded to the nanosecond)."""
