@@ -191,9 +191,9 @@ def test_the_buffer_counts_what_it_refused_for_its_size():
 @pytest.mark.parametrize("values", [[], [1.5], [0.0, -2.0]])
 @pytest.mark.parametrize("label", ["", "ab", "abcd"])
 def test_the_oversize_studys_command_is_what_rclpy_writes_and_reads(dims, values, label):
-    """``studies/oversize.py`` builds its 3.2 MB command without 200 000 Python objects: the
+    """``benchmarks/oversize.py`` builds its 3.2 MB command without 200 000 Python objects: the
     bytes are as long as rclpy's for the same message, and rclpy reads them back as it."""
-    from vjm_ros.studies.oversize import wide_layout_command
+    from benchmarks.oversize import wide_layout_command
 
     msg = Float64MultiArray(data=values)
     msg.layout.dim = [MultiArrayDimension(label=label) for _ in range(dims)]
@@ -204,10 +204,10 @@ def test_the_oversize_studys_command_is_what_rclpy_writes_and_reads(dims, values
 
 @pytest.mark.ros
 def test_the_oversize_study_runs_a_node_that_refuses_the_stream():
-    """``python -m vjm_ros.studies.oversize`` end to end, one second per run: its figures are
+    """``python -m benchmarks.oversize`` end to end, one second per run: its figures are
     benchmarks (printed, not asserted); what is asserted is that the stream reached the node
     and that the node refused it for its size, and nothing else."""
-    from vjm_ros.studies import oversize
+    from benchmarks import oversize
 
     row = oversize.measure("five_bar", seconds=1.0)
     print(oversize._format(row))

@@ -1,9 +1,9 @@
 """Command fuzzing and a 10 kHz flood against a live ``vjm_sim_node`` (three processes).
 
-The measurement is :func:`vjm_ros.studies.flood.measure`: the node (realtime, 1 kHz) and the flooder
+The measurement is :func:`benchmarks.flood.measure`: the node (realtime, 1 kHz) and the flooder
 run as separate processes on this process's ROS domain; this process probes ``/joint_states``.
 The flood rate reached, the share of ticks kept and the resynchronisations are timing figures of
-this machine: they are printed here and measured by ``python -m vjm_ros.studies.flood``, never
+this machine: they are printed here and measured by ``python -m benchmarks.flood``, never
 asserted. This test asserts behaviour only: the node runs its whole duration, applies only valid
 commands, still answers afterwards, throttles its warnings and does not leak.
 """
@@ -17,10 +17,10 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from benchmarks import flood  # noqa: E402
 from vjm_ros.realtime.commands import CommandBuffer  # noqa: E402
 from vjm_ros.ros.node import WARNING_PERIOD  # noqa: E402
 from vjm_ros.scene.loader import load_scene  # noqa: E402
-from vjm_ros.studies import flood  # noqa: E402
 
 FLOOD_SECONDS = 10.0
 FLOOD_HZ = 10_000.0

@@ -1,9 +1,9 @@
-"""Command fuzzing and floods against a live ``vjm_sim_node``; re-run with ``python -m vjm_ros.studies.flood``.
+"""Command fuzzing and floods against a live ``vjm_sim_node``; re-run with ``python -m benchmarks.flood``.
 
 Three processes, as in a real ROS graph:
 
 1. the simulator node (realtime, ``rate`` Hz, ``command_timeout`` 0.5 s);
-2. a flooder (``python -m vjm_ros.studies.flood --publish ...``) that publishes ``flood_hz`` commands per
+2. a flooder (``python -m benchmarks.flood --publish ...``) that publishes ``flood_hz`` commands per
    second for ``seconds`` on both command topics (:class:`FuzzCommands`): valid efforts (some beyond
    the limits), NaN, Inf, wrong-length and oversized arrays, unknown, duplicate and non-actuated
    names. It then sends one last valid command, the *sentinel* (repeated for
@@ -16,7 +16,7 @@ The verdict (:func:`measure`): ticks kept (the node's late/missed counts), every
 applied is a value of a valid command (clamped to the limits) or zero, the sentinel is applied,
 warnings stay throttled (one per kind and second), and memory growth over the flood.
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.flood [--scene five_bar] [--json]
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m benchmarks.flood [--scene five_bar] [--json]
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import ROOT
 from vjm_ros.scene.loader import load_scene
 
 VALID_ARRAY = "valid_array"
@@ -312,10 +313,10 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
             # follow the flood and its sentinel (started after the first state, the sentinel
             # sometimes came after the node had stopped).
             flooder = subprocess.Popen(
-                [sys.executable, "-m", "vjm_ros.studies.flood", "--publish", "--scene", scene,
+                [sys.executable, "-m", "benchmarks.flood", "--publish", "--scene", scene,
                  "--flood-hz", str(flood_hz), "--seconds", str(seconds), "--seed", str(seed),
                  "--out", str(sent_file)],
-                env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                env=env, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
             _wait_for_first_state(node, states, output)
             memory = _sample_memory(node, flooder)
             flood_out = flooder.communicate(timeout=60.0)[0]
@@ -423,7 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.flood",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.flood",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="five_bar", help="scene with actuators (five_bar)")
     parser.add_argument("--seconds", type=float, default=10.0, help="length of the flood, s (10)")

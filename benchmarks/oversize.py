@@ -1,5 +1,5 @@
 """A live ``vjm_sim_node`` under a stream of oversized commands; re-run with
-``python -m vjm_ros.studies.oversize``.
+``python -m benchmarks.oversize``.
 
 The stream: a valid ``std_msgs/Float64MultiArray`` on ``~/effort_commands`` whose layout holds
 ``dims`` empty dimensions (200 000 by default: 3.2 MB, 16 bytes each) besides one value per
@@ -16,7 +16,7 @@ late and missed ticks, the largest lateness of a tick, and the commands accepted
 refused for their size before reading them (``refused_oversize_commands``, where the node
 counts it).
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.oversize [--scene five_bar] [--json]
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m benchmarks.oversize [--scene five_bar] [--json]
 
 Numbers depend on what else runs on the machine: the 1-minute load average is printed with them.
 """
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.oversize",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.oversize",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="five_bar", help="scene with actuators (five_bar)")
     parser.add_argument("--seconds", type=float, default=10.0,
