@@ -229,7 +229,8 @@ def encode_markers(message: dict) -> bytes:
 # ---------------------------------------------------------------- fixed layouts
 STAMP_OFFSET = len(_ENCAPSULATION)
 """Byte offset of the header stamp (``int32`` sec, ``uint32`` nanosec) in a stamped message."""
-_STAMP = struct.Struct("<iI")
+STAMP = struct.Struct("<iI")
+"""``builtin_interfaces/Time`` as CDR: ``int32`` sec, ``uint32`` nanosec."""
 _DOUBLES: dict[int, struct.Struct] = {}
 
 
@@ -276,7 +277,7 @@ class FixedLayout:
         if self.stamps:
             sec, nanosec = stamp_parts(ns)
             for at in self.stamps:
-                _STAMP.pack_into(buf, at, sec, nanosec)
+                STAMP.pack_into(buf, at, sec, nanosec)
         for (offset, count), values in zip(self.arrays, runs, strict=True):
             _doubles(count).pack_into(buf, offset, *values)
         return bytes(buf)

@@ -22,12 +22,6 @@ import numpy as np
 from vjm_ros.logs import cdr
 from vjm_ros.logs import messages as layouts
 
-STAMP_OFFSET = cdr.STAMP_OFFSET
-"""Offset of the first header's stamp (``int32 sec``, ``uint32 nanosec``) in every per-tick
-message: right after the 4-byte encapsulation header, since the header (or, in ``Clock``, the
-stamp itself) is the first field."""
-_STAMP = cdr._STAMP
-
 
 class _Buffer:
     """One serialized message, a copy of its layout's template, and numpy views of its runs."""
@@ -80,7 +74,7 @@ class TickWire:
             self._ns = ns
             sec, nanosec = divmod(ns, 1_000_000_000)
             for buf in self._stamped:
-                _STAMP.pack_into(buf.data, STAMP_OFFSET, sec, nanosec)
+                cdr.STAMP.pack_into(buf.data, cdr.STAMP_OFFSET, sec, nanosec)
 
     def joint_state(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> bytes:
         """Serialized ``joint_states`` (as :func:`~vjm_ros.ros.conversions.joint_state`;
@@ -151,7 +145,7 @@ class MarkerWire:
         data = bytearray(layout.template)
         sec, nanosec = divmod(layouts.seconds_to_ns(t), 1_000_000_000)
         for at in layout.stamps:
-            _STAMP.pack_into(data, at, sec, nanosec)
+            cdr.STAMP.pack_into(data, at, sec, nanosec)
         out = np.frombuffer(data, dtype=np.uint8)
         for (start, count), spec in zip(layout.arrays, specs, strict=True):
             xyz = out[start : start + 8 * count].view("<f8").reshape(-1, 3)
