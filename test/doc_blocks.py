@@ -96,8 +96,6 @@ def doc_blocks() -> list[Block]:
     return blocks
 
 
-
-
 def flat(text: str) -> str:
     """Whitespace-normalized text (a doc wraps long messages over lines)."""
     return " ".join(text.split())
@@ -195,6 +193,7 @@ def key(command: str) -> str:
 
 
 def background(command: str) -> bool:
+    """Whether ``command`` ends with ``&`` (it runs beside the next one)."""
     return shlex.split(command.replace("\\\n", " "), comments=True)[-1:] == ["&"]
 
 
@@ -202,7 +201,6 @@ def foreground(command: str) -> str:
     """``command`` without its trailing ``&`` and comment."""
     words = shlex.split(command.replace("\\\n", " "), comments=True)
     return shlex.join(words[:-1] if words[-1:] == ["&"] else words)
-
 
 
 # ----------------------------------------------------------------------------- maps
@@ -228,7 +226,6 @@ def named_paths(block: Block) -> list[tuple[int, str, list[Path]]]:
         bases = [ROOT, ROOT / "vjm_ros", *(folder for _, folder in stack)]
         found += [(n, match[1], bases) for match in PATH_TOKEN.finditer(stripped)]
     return found
-
 
 
 # ------------------------------------------------------------------------ synopses

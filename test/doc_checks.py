@@ -44,7 +44,6 @@ def help_text(*argv: str) -> str:
     return buf.getvalue()
 
 
-
 def check_vjm_usage(block: Block, tmp_path: Path) -> None:
     """Each ``vjm CMD ...`` line against ``vjm CMD --help``: the subcommands are all there, and
     every option the doc shows exists, is optional or required as shown, and takes a value or
@@ -240,8 +239,6 @@ def check_computed_torque_law(block: Block, tmp_path: Path) -> None:
     # round-off of the same operations in another order: 1e-9 of efforts of order 1-10 N m
     assert np.allclose(names["tau"], tau, rtol=0, atol=1e-9), (names["tau"], tau)
     assert not np.allclose(tau, 0.0)
-
-
 
 
 CHECKS: dict[str, Callable[[Block, Path], None]] = {

@@ -535,7 +535,6 @@ def test_sweep_spec_blocks_load(block, tmp_path):
     check_cases(spec, spec.cases())  # what `vjm sweep` refuses before any run
 
 
-
 @pytest.mark.parametrize("block", params(of_kind("text paths")))
 def test_maps_name_existing_paths(block):
     missing = [f"{block.path}:{n}: {path}" for n, path, bases in named_paths(block)
