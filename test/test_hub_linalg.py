@@ -1,6 +1,6 @@
 """The hub solves (:mod:`vjm_ros.core.hub_linalg`) against the dense ones and the numpy oracle.
 
-Chains whose tips meet at one pin (:func:`vjm_ros.studies.bench.scaling.star_scene`) have their
+Chains whose tips meet at one pin (:func:`vjm_ros.scene.generated.star_scene`) have their
 closure rows laid out around the first chain; the kernels then solve ``A M^-1 A^T`` by
 Woodbury's identity and ``M + h A^T W A`` by block elimination instead of dense solves.
 
@@ -27,8 +27,8 @@ from vjm_ros.core import hub_linalg, kernels, pipeline, small_linalg
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.packing import HUB_MIN_GROUPS, chain_blocks, closure_layout
+from vjm_ros.scene.generated import star_scene
 from vjm_ros.scene.loader import builtin_scenes, load_scene
-from vjm_ros.studies.bench.scaling import star_scene
 
 pytest.importorskip("numba")
 
@@ -205,7 +205,7 @@ _NO_ALLOCATION = """
 from numba.core.runtime import rtsys
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
-from vjm_ros.studies.bench.scaling import star_scene
+from vjm_ros.scene.generated import star_scene
 sc = star_scene(6)
 for integ, closure in (("rk4", "exact"), ("implicit_euler", "penalty")):
     sim = Simulator(sc.model, SimulationSettings(integrator=integ, closure=closure), sc.gains)

@@ -14,11 +14,11 @@ import pytest
 from conftest import FIXED_STEP_SETTINGS
 
 from vjm_ros.core.errors import DivergenceError
+from vjm_ros.scene.generated import star_scene
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
 from vjm_ros.sim.trajectory import Trajectory
-from vjm_ros.studies.bench.scaling import star_scene
 
 pytest.importorskip("numba")
 
