@@ -22,6 +22,9 @@ import numpy as np
 from vjm_ros.logs import cdr
 from vjm_ros.logs import messages as layouts
 
+_pack_stamp = cdr.STAMP.pack_into
+_AT = cdr.STAMP_OFFSET
+
 
 class _Buffer:
     """One serialized message, a copy of its layout's template, and numpy views of its runs."""
@@ -64,7 +67,7 @@ class TickWire:
         self._linear = [w.runs[0] for w in self.wrenches]
         self._torque = [w.runs[1] for w in self.wrenches]
         self.clock = _Buffer(cdr.CLOCK_LAYOUT)
-        self._stamped = [self.joint, *self.wrenches, self.clock]
+        self._stamped = [b.data for b in (self.joint, *self.wrenches, self.clock)]
         self._ns: int | None = None
 
     def set_time(self, t: float) -> None:
@@ -73,8 +76,8 @@ class TickWire:
         if ns != self._ns:
             self._ns = ns
             sec, nanosec = divmod(ns, 1_000_000_000)
-            for buf in self._stamped:
-                cdr.STAMP.pack_into(buf.data, cdr.STAMP_OFFSET, sec, nanosec)
+            for data in self._stamped:
+                _pack_stamp(data, _AT, sec, nanosec)
 
     def joint_state(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> bytes:
         """Serialized ``joint_states`` (as :func:`~vjm_ros.ros.conversions.joint_state`;
@@ -145,7 +148,7 @@ class MarkerWire:
         data = bytearray(layout.template)
         sec, nanosec = divmod(layouts.seconds_to_ns(t), 1_000_000_000)
         for at in layout.stamps:
-            cdr.STAMP.pack_into(data, at, sec, nanosec)
+            _pack_stamp(data, at, sec, nanosec)
         out = np.frombuffer(data, dtype=np.uint8)
         for (start, count), spec in zip(layout.arrays, specs, strict=True):
             xyz = out[start : start + 8 * count].view("<f8").reshape(-1, 3)
