@@ -495,6 +495,13 @@ those as ``Literal[int](-1)`` and compiles a whole extra copy of :func:`step` fo
 signature (seconds each on a cold cache)."""
 
 
+def as_arguments(value: PackedModel | Data) -> tuple:
+    """A :class:`PackedModel` or :class:`Data` as the plain tuple of its fields that the compiled
+    functions take: numba types a plain tuple of arrays in its dispatcher's C code, a named one
+    in Python (some 3 µs more per call of :func:`step` from Python, measured on the four-bar)."""
+    return tuple(value)
+
+
 def evaluate(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
              qdd: np.ndarray, kernel=None) -> int:
     """Every term at ``(q, qd)`` into ``data`` and the accelerations with efforts ``tau``.
@@ -517,23 +524,23 @@ def evaluate(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, tau:
     int
         0, or 1 when a matrix was exactly singular.
     """
-    return (kernel or step)(EVALUATE, q, qd, tau, 0.0, ONE_STEP, 0.0, model, data, qdd,
-                            data.spare, NO_KNOWN, NO_ROW)
+    return (kernel or step)(EVALUATE, q, qd, tau, 0.0, ONE_STEP, 0.0, tuple(model), tuple(data),
+                            qdd, data.spare, NO_KNOWN, NO_ROW)
 
 
 def residual(model: PackedModel, data: Data, q: np.ndarray, kernel=None) -> int:
     """Closure residuals at ``q`` with zero rates, without the dynamics or the Jacobian, into
     ``data.kin`` and ``data.crow`` (columns :data:`R_RES`, :data:`R_DX` .. :data:`R_DZ`)."""
-    return (kernel or step)(RESIDUAL, q, q, q, 0.0, ONE_STEP, 0.0, model, data, data.spare,
-                            data.spare, NO_KNOWN, NO_ROW)
+    return (kernel or step)(RESIDUAL, q, q, q, 0.0, ONE_STEP, 0.0, tuple(model), tuple(data),
+                            data.spare, data.spare, NO_KNOWN, NO_ROW)
 
 
 def implicit_velocity(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray,
                       tau: np.ndarray, h: float, v: np.ndarray, kernel=None) -> int:
     """``v``, the velocity after a step of length ``h`` (s) implicit in the penalty forces
     (``qd + h qdd`` for exact closures); arguments and status as :func:`evaluate`."""
-    return (kernel or step)(IMPLICIT_VELOCITY, q, qd, tau, h, ONE_STEP, 0.0, model, data, v,
-                            data.spare, NO_KNOWN, NO_ROW)
+    return (kernel or step)(IMPLICIT_VELOCITY, q, qd, tau, h, ONE_STEP, 0.0, tuple(model),
+                            tuple(data), v, data.spare, NO_KNOWN, NO_ROW)
 
 
 def advance(model: PackedModel, data: Data, method: int, q: np.ndarray, qd: np.ndarray,
@@ -546,8 +553,8 @@ def advance(model: PackedModel, data: Data, method: int, q: np.ndarray, qd: np.n
     :data:`IMPLICIT_EULER` (:mod:`vjm_ros.core.integrators.fixed`); ``data`` holds the terms of
     the last stage. Status as :func:`evaluate`.
     """
-    return (kernel or step)(method, q, qd, tau, h, steps, 0.0, model, data, q_out, qd_out,
-                            NO_KNOWN, NO_ROW)
+    return (kernel or step)(method, q, qd, tau, h, steps, 0.0, tuple(model), tuple(data), q_out,
+                            qd_out, NO_KNOWN, NO_ROW)
 
 
 def project(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, steps: int,
@@ -556,8 +563,8 @@ def project(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, steps
     Gauss-Newton steps in the metric of ``M`` until ``max |C| <= tol`` (m or rad), then one
     velocity projection (``rcond = 1e-10``), as
     :meth:`vjm_ros.core.mechanism.Mechanism.project`. Status as :func:`evaluate`."""
-    return (kernel or step)(PROJECT, q, qd, data.zero, 0.0, steps, tol, model, data, q_out,
-                            qd_out, NO_KNOWN, NO_ROW)
+    return (kernel or step)(PROJECT, q, qd, data.zero, 0.0, steps, tol, tuple(model),
+                            tuple(data), q_out, qd_out, NO_KNOWN, NO_ROW)
 
 
 HUB_SOLVES = False
@@ -595,9 +602,11 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
     h : float
     steps : int
     tol : float
-    model : PackedModel
-    data : Data
-        Holds the terms of the last evaluation on return.
+    model : tuple
+        A :class:`PackedModel`'s fields, as a plain tuple (:func:`as_arguments`).
+    data : tuple
+        A :class:`Data`'s fields, as a plain tuple; it holds the terms of the last evaluation on
+        return.
     out_a, out_b : ndarray, shape (n,)
     known : ndarray, shape (rows, n)
         ``known[row]``, for a fixed-step method and ``row >= 0``: the acceleration at
@@ -612,11 +621,8 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
         0, or 1 when a matrix was exactly singular.
     """
     lint, lflt, cint, cflt, gains, par, blocks = model
-    kin, mm, bias, cm, crow, jac, points = (data.kin, data.mm, data.bias, data.cm, data.crow,
-                                            data.jac, data.points)
-    lu, piv, minv_at, g, v, vec = data.lu, data.piv, data.minv_at, data.g, data.v, data.vec
-    rhs, corr, ks, vs, qi, scratch = data.rhs, data.corr, data.ks, data.vs, data.qi, data.scratch
-    zero, touch, lay = data.zero, data.touch, data.layout
+    (kin, mm, bias, cm, crow, jac, points, lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi,
+     scratch, _, zero, touch, lay) = data
     n = q0.shape[0]
     r = crow.shape[0]
     then_evaluate = op >= THEN_EVALUATE

@@ -174,6 +174,7 @@ class Mechanism:
         n, r = model.n, model.n_rows
         self._layout = closure_layout(model, self._packed.blocks)
         self._data = self.new_data()
+        self._shapes = K.output_shapes(self._packed)
         # the compiled copies with the hub solves only where there is a hub layout (they take
         # seconds more to compile)
         hub = self._layout[r, 0] >= 0
@@ -231,10 +232,8 @@ class Mechanism:
 
     def _fresh_outputs(self, fill: float | None = None) -> K.Data:
         """The instance's workspace with fresh output buffers (the scratch arrays shared)."""
-        shapes = K.output_shapes(self._packed)
         make = np.empty if fill is None else np.zeros
-        return self._data._replace(**{name: make(shape)
-                                      for name, shape in zip(K.Data._fields[:7], shapes, strict=True)})
+        return K.Data(*(make(shape) for shape in self._shapes), *self._data[7:])
 
     def _check(self, status: int) -> None:
         """Settle the tiered kernel (:meth:`_settle_step`); a singular matrix as ``LinAlgError``."""
@@ -575,7 +574,8 @@ class Mechanism:
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
                 int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
-                bool(project), float(limit), self._packed, self._data, lengths, plink, plocal,
+                bool(project), float(limit), K.as_arguments(self._packed),
+                K.as_arguments(self._data), lengths, plink, plocal,
                 part_out, self._tick_state,
             )
             reused = max(ran - 1, 0)  # each tick after a call's first starts from the sample before

@@ -81,10 +81,11 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     ----------
     row : int
     q, qd, tau : ndarray, shape (n,)
-    model : PackedModel
-        :class:`vjm_ros.core.kernels.PackedModel`.
-    data : Data
-        The kernel's workspace (:func:`vjm_ros.core.kernels.make_data`).
+    model : tuple
+        A :class:`vjm_ros.core.kernels.PackedModel`'s fields as a plain tuple
+        (:func:`vjm_ros.core.kernels.as_arguments`).
+    data : tuple
+        The kernel's workspace (:func:`vjm_ros.core.kernels.make_data`), likewise.
     lengths : ndarray, shape (n,)
         Link lengths, m.
     plink : ndarray of int64, shape (p,)
@@ -104,8 +105,8 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     int
         0, or 1 when the mass matrix was exactly singular.
     """
-    cint, gains, par = model.cint, model.gains, model.par
-    kin, crow, cpts = data.kin, data.crow, data.points
+    _, _, cint, _, gains, par, _ = model
+    kin, _, _, _, crow, _, cpts = data[:7]
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
     o_energy, o_power, o_diss, o_seg = out[8:]
     n = q.shape[0]
@@ -211,7 +212,7 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
         q[j] = q0[j]
         qd[j] = qd0[j]
         zero[j] = 0.0
-    k = model.cint.shape[0]
+    k = model[2].shape[0]  # closures: rows of cint
     o_qdd = out[2]
     o_error = out[6]
     # Without a projection, the step also evaluates at its end state (THEN_EVALUATE): the
