@@ -160,7 +160,8 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
     ),
     ".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p duration:=5.0": (
         Run(".venv/bin/vjm_sim_node --ros-args -p scene:=five_bar -p duration:=0.2",
-            why="0.2 s of the 5 s run"),
+            why="0.2 s of the 5 s run; slow: the default suite starts and ends the node with the "
+                "params file's run below", slow=True),
     ),
     ".venv/bin/vjm_sim_node --ros-args --params-file config/sim_node.yaml -p mcap:=run.mcap": (
         Run(".venv/bin/vjm_sim_node --ros-args --params-file config/sim_node.yaml "
@@ -175,12 +176,12 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
     ".venv/bin/vjm_pd_controller": (Run(why=SIGINT_END, slow=True, until_sigint=True),),
     ".venv/bin/vjm_sim_node --ros-args -r __ns:=/robot1 -p scene:=five_bar -p duration:=5.0 &": (
         Run(".venv/bin/vjm_sim_node --ros-args -r __ns:=/robot1 -p scene:=five_bar "
-            "-p duration:=0.5", why="0.5 s of the 5 s, beside the second simulator"),
+            "-p duration:=0.2", why="0.2 s of the 5 s, beside the second simulator"),
     ),
     ".venv/bin/vjm_sim_node --ros-args -r __ns:=/robot2 -p scene:=four_bar -p duration:=5.0 "
     "-p publish_clock:=false": (
         Run(".venv/bin/vjm_sim_node --ros-args -r __ns:=/robot2 -p scene:=four_bar "
-            "-p duration:=0.5 -p publish_clock:=false", why="0.5 s of the 5 s"),
+            "-p duration:=0.2 -p publish_clock:=false", why="0.2 s of the 5 s"),
     ),
     ".venv/bin/vjm_sim_node --ros-args -p scene:=three_chain -p closure:=exact "
     "-p wait_for_command:=true &": (
