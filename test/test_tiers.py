@@ -161,8 +161,8 @@ def _evaluate_args(scene: str) -> tuple:
 
     m = Mechanism.reader(load_scene(scene).model)
     q, qd = m.model.initial_state()
-    return (kernels.EVALUATE, q, qd, np.zeros(m.n), 0.0, 1, 0.0, m.packed, m.new_data(),
-            np.empty(m.n), np.empty(m.n), kernels.NO_KNOWN, -1)
+    return (kernels.EVALUATE, q, qd, np.zeros(m.n), 0.0, 1, 0.0, tuple(m.packed),
+            tuple(m.new_data()), np.empty(m.n), np.empty(m.n), kernels.NO_KNOWN, -1)
 
 
 def test_the_first_calls_run_plain_without_loading_the_compiled_code(monkeypatch):
