@@ -7,7 +7,7 @@ message of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchSt
 written by :class:`CdrWriter`: its bytes with zero stamps and numbers and the offsets of both.
 The node refills a copy of it in place (:class:`vjm_ros.ros.wire.TickWire`,
 :class:`vjm_ros.ros.wire.MarkerWire`, published as bytes), the recorder packs one message
-(:meth:`FixedLayout.pack`, behind :func:`joint_state_encoder` and its siblings) or a whole
+(:attr:`FixedLayout.packer`, behind :func:`joint_state_encoder` and its siblings) or a whole
 block (:mod:`vjm_ros.logs.mcap_block`). Measured here in one run
 (``pytest -m bench test/bench_logging.py``): a JointState of three joints costs 1.7 us on its
 fast path against 12-14 us through rosbags from the dict, a WrenchStamped 0.4 us against
@@ -231,27 +231,19 @@ STAMP_OFFSET = len(_ENCAPSULATION)
 """Byte offset of the header stamp (``int32`` sec, ``uint32`` nanosec) in a stamped message."""
 STAMP = struct.Struct("<iI")
 """``builtin_interfaces/Time`` as CDR: ``int32`` sec, ``uint32`` nanosec."""
-_DOUBLES: dict[int, struct.Struct] = {}
+NS_PER_S = 1_000_000_000
 
 
-def _doubles(count: int) -> struct.Struct:
-    """``struct`` of ``count`` little-endian doubles (cached)."""
-    packer = _DOUBLES.get(count)
-    if packer is None:
-        packer = _DOUBLES[count] = struct.Struct(f"<{count}d")
-    return packer
-
-
-def stamp_parts(ns: int) -> tuple[int, int]:
-    """``(sec, nanosec)`` of a stamp at ``ns`` nanoseconds."""
-    return divmod(int(ns), 1_000_000_000)
+def _floats(values) -> list[float]:
+    """``values`` (array-like of numbers) as a list of Python floats."""
+    return np.asarray(values, dtype=np.float64).tolist()
 
 
 @dataclass(frozen=True)
 class FixedLayout:
     """The one byte layout of a per-tick message: its bytes with zero stamps and numbers, and
     where the stamps and numbers go. The node refills a copy in place
-    (:class:`vjm_ros.ros.wire.TickWire`), the logs pack one message (:meth:`pack`) or many at once
+    (:class:`vjm_ros.ros.wire.TickWire`), the logs pack one message (:attr:`packer`) or many at once
     (:mod:`vjm_ros.logs.mcap_block`).
 
     Attributes
@@ -270,17 +262,24 @@ class FixedLayout:
     stamps: tuple[int, ...]
     arrays: tuple[tuple[int, int], ...]
 
-    def pack(self, ns: int, *runs: Sequence[float]) -> bytes:
-        """The message stamped ``ns`` (ns) holding ``runs`` (one sequence of floats per entry of
-        :attr:`arrays`, of its count)."""
-        buf = bytearray(self.template)
-        if self.stamps:
-            sec, nanosec = stamp_parts(ns)
-            for at in self.stamps:
-                STAMP.pack_into(buf, at, sec, nanosec)
-        for (offset, count), values in zip(self.arrays, runs, strict=True):
-            _doubles(count).pack_into(buf, offset, *values)
-        return bytes(buf)
+    @functools.cached_property
+    def packer(self) -> tuple[struct.Struct, tuple[bytes, ...]]:
+        """The whole message as one ``struct`` and its constant pieces, for one-call encoders.
+
+        The format holds, in byte order, a constant piece (``s``), a stamp (``iI``) or a run
+        (``d`` per value), ..., a last constant piece: ``pack(c0, sec, nanosec, c1, *run, ...)``
+        with ``c0, c1, ...`` the pieces returned writes the message. The stamps come before the
+        runs in every layout built here but :func:`markers_layout`'s (refilled in place).
+        """
+        fields = sorted([(at, 8, "iI") for at in self.stamps]
+                        + [(offset, 8 * count, f"{count}d") for offset, count in self.arrays])
+        fmt, pieces, pos = "<", [], 0
+        for at, size, code in fields:
+            pieces.append(self.template[pos:at])
+            fmt += f"{at - pos}s{code}"
+            pos = at + size
+        pieces.append(self.template[pos:])
+        return struct.Struct(fmt + f"{len(self.template) - pos}s"), tuple(pieces)
 
 
 def _stamped(w: CdrWriter, frame_id: str) -> list[int]:
@@ -366,7 +365,20 @@ def joint_state_encoder(
         ``f(ns, position, velocity, effort) -> bytes`` with arrays of shape (len(names),); the
         result equals :func:`encode` of the corresponding dict.
     """
-    return joint_state_layout(names, frame_id).pack
+    packer, pieces = joint_state_layout(names, frame_id).packer
+    pack = packer.pack
+    if not names:
+        c0, c1 = pieces
+        return lambda ns, position, velocity, effort: pack(c0, *divmod(int(ns), NS_PER_S), c1)
+    c0, c1, c2, c3, c4 = pieces
+
+    def encode_joint_state(ns: int, position, velocity, effort) -> bytes:
+        sec, nanosec = divmod(int(ns), NS_PER_S)
+        # Python floats: struct takes them several times faster than numpy's scalars
+        return pack(c0, sec, nanosec, c1, *_floats(position), c2, *_floats(velocity), c3,
+                    *_floats(effort), c4)
+
+    return encode_joint_state
 
 
 def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes]:
@@ -378,10 +390,12 @@ def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes
     callable
         ``f(data) -> bytes`` with ``data`` of shape (size,).
     """
-    pack = multi_array_layout(layout, size).pack
+    fixed = multi_array_layout(layout, size)
     if not size:
-        return lambda data: pack(0)
-    return lambda data: pack(0, data)
+        return lambda data: fixed.template
+    packer, (c0, c1) = fixed.packer
+    pack = packer.pack
+    return lambda data: pack(c0, *_floats(data), c1)
 
 
 def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, float, float], bytes]:
@@ -392,13 +406,24 @@ def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, flo
     callable
         ``f(ns, fx, fy, mz) -> bytes``: force ``(fx, fy, 0)`` N, torque ``(0, 0, mz)`` N m.
     """
-    pack = wrench_stamped_layout(frame_id).pack
-    return lambda ns, fx, fy, mz: pack(ns, (fx, fy), (mz,))
+    packer, (c0, c1, c2, c3) = wrench_stamped_layout(frame_id).packer
+    pack = packer.pack
+
+    def encode_wrench(ns: int, fx: float, fy: float, mz: float) -> bytes:
+        sec, nanosec = divmod(int(ns), NS_PER_S)
+        return pack(c0, sec, nanosec, c1, fx, fy, c2, mz, c3)
+
+    return encode_wrench
+
+
+_CLOCK = CLOCK_LAYOUT.packer[0].pack
+_CLOCK_PIECES = CLOCK_LAYOUT.packer[1]
 
 
 def encode_clock(ns: int) -> bytes:
     """``rosgraph_msgs/Clock`` at ``ns`` nanoseconds (:data:`CLOCK_LAYOUT`)."""
-    return CLOCK_LAYOUT.pack(ns)
+    sec, nanosec = divmod(int(ns), NS_PER_S)
+    return _CLOCK(_CLOCK_PIECES[0], sec, nanosec, _CLOCK_PIECES[1])
 
 
 def markers_layout(message: dict) -> FixedLayout:
