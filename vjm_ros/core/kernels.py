@@ -837,7 +837,7 @@ in one sitting (per tick, blocks of 1000): one link with ``semi_implicit_euler``
 (the bare step in one call: 0.22), ``implicit_euler`` 0.50 -> 0.28, ``rk4`` exact 1.74 -> 1.44;
 the four-bar with ``rk4`` exact 3.19 -> 2.83 µs; the same numbers to the bit. The cost: the
 pipeline compiles a second copy of the step's code (seconds, once per machine, in the
-background on a first run: :mod:`vjm_ros.core.tiers`)."""
+background on a first run: :mod:`vjm_ros.jit.tiers`)."""
 
 step_with_hub_inline = _variant(step, "step_with_hub_inline", inline="always", HUB_SOLVES=True)
 """:data:`step_with_hub` inlined into its compiled caller (:data:`step_inline`)."""

@@ -144,7 +144,7 @@ class Mechanism:
     warm_up : bool
         Compile the kernel (or load it from numba's cache) now, so that the first control tick
         does not pay for it. Not where entry points start as plain Python
-        (:func:`vjm_ros.core.tiers.enabled`; the benchmarks and studies compile first): there
+        (:func:`vjm_ros.jit.tiers.enabled`; the benchmarks and studies compile first): there
         the kernel's first :data:`STEP_PLAIN_CALLS` calls run as plain Python, which a run that
         ticks in the block pipeline (a kernel of its own) never outgrows, and it starts 0.1 s
         sooner without loading the kernel; :meth:`warm_up` loads it when a loop needs it.
@@ -179,7 +179,7 @@ class Mechanism:
         # seconds more to compile)
         hub = self._layout[r, 0] >= 0
         # as plain Python while numba compiles them, on a machine whose cache lacks them
-        # (vjm_ros.core.tiers); the compiled functions themselves once they are in use
+        # (vjm_ros.jit.tiers); the compiled functions themselves once they are in use
         self._step = tiers.entry(K, "step_with_hub" if hub else "step",
                                  plain_calls=STEP_PLAIN_CALLS)
         self._advance_ticks = tiers.entry(
@@ -257,7 +257,7 @@ class Mechanism:
     def entry_points(self) -> tuple:
         """The compiled functions this mechanism calls: ``(step, advance_ticks)`` of
         :mod:`~vjm_ros.core.kernels` and :mod:`~vjm_ros.core.pipeline`, or their hub copies."""
-        return tuple(e.compiled if isinstance(e, tiers.Tiered) else e
+        return tuple(e.dispatcher() if isinstance(e, tiers.Tiered) else e
                      for e in (self._step, self._advance_ticks))
 
     def warm_up(self) -> float:
@@ -281,14 +281,14 @@ class Mechanism:
     @property
     def tier(self) -> str:
         """How the block pipeline runs: ``"compiled"``, ``"plain"`` (plain Python while numba
-        compiles it in the background, :mod:`vjm_ros.core.tiers`) or ``"new"`` (not called yet)."""
+        compiles it in the background, :mod:`vjm_ros.jit.tiers`) or ``"new"`` (not called yet)."""
         advance = self._advance_ticks
         return advance.tier if isinstance(advance, tiers.Tiered) else "compiled"
 
     @property
     def compiling(self) -> bool:
         """Whether an entry point of the kernels runs as plain Python while numba compiles it in
-        the background (a first run on a machine, :mod:`vjm_ros.core.tiers`)."""
+        the background (a first run on a machine, :mod:`vjm_ros.jit.tiers`)."""
         return any(isinstance(e, tiers.Tiered) and e.tier == "plain"
                    for e in (self._step, self._advance_ticks))
 
@@ -590,10 +590,10 @@ class Mechanism:
 
 STEP_PLAIN_CALLS = 64
 """Calls of the kernel (:func:`vjm_ros.core.kernels.step`) that run as plain Python before it is
-loaded from numba's cache (:class:`vjm_ros.core.tiers.Tiered`): one evaluation of the thesis
+loaded from numba's cache (:class:`vjm_ros.jit.tiers.Tiered`): one evaluation of the thesis
 scenes takes 0.2-0.5 ms as plain Python, the load 70-120 ms on a slow machine, and 0.3-0.4 s
 where it is the first compiled function a process needs (numba imported with it,
-:func:`vjm_ros.core.jit.activate`). ``vjm run`` makes 8-11 such calls besides its block pipeline
+:func:`vjm_ros.jit.deferred.activate`). ``vjm run`` makes 8-11 such calls besides its block pipeline
 (the scene's inertia check, its assembly, the mobility check, the first sample); ``vjm scenes``
 41 for the eight built-in scenes."""
 
@@ -601,14 +601,14 @@ where it is the first compiled function a process needs (numba imported with it,
 PIPELINE_PLAIN_CALLS = 1
 """Calls of the block pipeline (:func:`vjm_ros.core.pipeline.advance_ticks`) that run as plain
 Python, :data:`PLAIN_PART_TICKS` ticks at most each, before it is loaded from numba's cache
-(:class:`vjm_ros.core.tiers.Tiered`), where entry points start as plain Python: a run's first
+(:class:`vjm_ros.jit.tiers.Tiered`), where entry points start as plain Python: a run's first
 ticks then come before numba is imported at all (0.3-0.4 s with the loading of the pipeline,
 against 10-20 ms for the plain ticks), and a run of that many ticks never imports it.
 :meth:`Mechanism.warm_up_pipeline` loads it at once."""
 
 
 PLAIN_PART_TICKS = 20
-"""Ticks per call of the block pipeline while it runs as plain Python (:mod:`vjm_ros.core.tiers`):
+"""Ticks per call of the block pipeline while it runs as plain Python (:mod:`vjm_ros.jit.tiers`):
 a few tens of ms of the thesis scenes, after which the compiled code is taken if it is there."""
 
 

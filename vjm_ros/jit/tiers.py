@@ -172,6 +172,12 @@ class Tiered:
         imported now if it was not)."""
         self.compiled = jit.compiled(self.compiled)
 
+    def dispatcher(self):
+        """The compiled function itself (numba imported now if it was not), not called: what
+        runs once :attr:`ready`."""
+        self._resolve()
+        return self.compiled
+
     @property
     def ready(self) -> bool:
         """Whether calls run the compiled code (loading it from numba's cache now if the compile
