@@ -173,7 +173,7 @@ class FuzzCommands:
 # ---------------------------------------------------------------- the flooder process
 def publish(scene: str, node_name: str, rate: float, seconds: float, out: Path, seed: int) -> int:
     """Flood the node's command topics; write what was sent to ``out`` (JSON). Returns 0."""
-    from vjm_ros.ros.probes import GraphProbe
+    from benchmarks.probes import GraphProbe
 
     model = load_scene(scene).model
     fuzz = FuzzCommands(model.actuator_names, model.joint_names,
@@ -277,8 +277,8 @@ def measure(scene: str = "five_bar", seconds: float = 10.0, flood_hz: float = 10
     dict
         The figures and checks (see :func:`_format`).
     """
-    from vjm_ros.ros.probes import GraphProbe
-    from vjm_ros.studies.latency import node_command, node_summary
+    from benchmarks.latency import node_command, node_summary
+    from benchmarks.probes import GraphProbe
 
     model = load_scene(scene).model
     actuated = [model.joint_names.index(a) for a in model.actuator_names]

@@ -31,8 +31,8 @@ import threading
 import numpy as np
 
 from benchmarks import pacing_floor
+from benchmarks.latency import node_command, run_node, take_applied
 from vjm_ros.scene.loader import builtin_scenes, load_scene
-from vjm_ros.studies.latency import node_command, run_node, take_applied
 
 RATE = 1000.0
 
@@ -47,7 +47,7 @@ class LoopController:
     """
 
     def __init__(self, scene: str):
-        from vjm_ros.ros.probes import TopicSink
+        from benchmarks.probes import TopicSink
 
         model = load_scene(scene).model
         act = model.actuators[0]

@@ -95,8 +95,8 @@ def run_once(scene: str, rate: float, seconds: float, stream: bytes | None, hz: 
     """Run the node once, with the stream if ``stream`` holds its bytes; its figures."""
     import subprocess
 
-    from vjm_ros.ros.probes import GraphProbe
-    from vjm_ros.studies.latency import node_command, node_summary
+    from benchmarks.latency import node_command, node_summary
+    from benchmarks.probes import GraphProbe
 
     n = len(load_scene(scene).model.actuator_names)
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")

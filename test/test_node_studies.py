@@ -1,4 +1,4 @@
-"""The node measurements (studies.node_cost, studies.live_loop) run end to end; their figures
+"""The node measurements (benchmarks.node_cost, benchmarks.live_loop) run end to end; their figures
 are benchmarks, not asserted here.
 
 It starts the real node and the bare publisher as processes, with this process subscribed to
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
+from benchmarks import node_cost
 from vjm_ros.scene.loader import load_scene
-from vjm_ros.studies import node_cost
 
 
 def test_node_cost_measures_a_node_that_published_every_topic():

@@ -44,7 +44,7 @@ class FakeClock:
 
     The pacing tests below count late and missed ticks and resynchronisations on this clock, so
     those counts are exact and independent of the machine; real-clock figures are measured by
-    ``python -m vjm_ros.studies.latency``.
+    ``python -m benchmarks.latency``.
     """
 
     def __init__(self, t=0.0):

@@ -263,7 +263,7 @@ def test_realtime_mode_follows_the_wall_clock(harness):
     assert stamps_ns(h.messages("/joint_states")) == [k * 5_000_000 for k in range(301)]
     # Paced, not free-running: a realtime node cannot deliver 1.5 simulated seconds in much less
     # wall time (fast mode does it in ~0.1 s). Only this lower bound is behaviour; how close to
-    # 1.5 s a loaded machine keeps is a timing figure (python -m vjm_ros.studies.latency).
+    # 1.5 s a loaded machine keeps is a timing figure (python -m benchmarks.latency).
     assert arrivals[-1] - arrivals[0] > 1.2
     wait_for(lambda: len(h.messages("/clock")) >= 301, 5.0, "/clock")
     assert [nanoseconds(m.clock) for m in h.messages("/clock")] == [k * 5_000_000 for k in range(301)]

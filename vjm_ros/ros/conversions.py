@@ -1,6 +1,6 @@
 """Conversions between ROS 2 messages and arrays (message types only; rclpy is not started).
 
-The per-tick messages as rclpy message objects (the floor of :mod:`vjm_ros.ros.bare_publish` and
+The per-tick messages as rclpy message objects (the floor of :mod:`benchmarks.bare_publish` and
 the tests' oracle; the node publishes their bytes, :mod:`vjm_ros.ros.wire`); their layouts are
 those of :mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
 

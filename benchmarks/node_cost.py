@@ -1,6 +1,6 @@
 """What the node costs per tick against its floor: the physics plus bare rclpy publishing.
 
-``python -m vjm_ros.studies.node_cost [--scenes ...] [--seconds 5]`` measures, per scene, in one
+``python -m benchmarks.node_cost [--scenes ...] [--seconds 5]`` measures, per scene, in one
 run and with one subscriber process on every topic the node publishes (this process):
 
 1. **node**: ``vjm_sim_node`` in fast mode (``realtime:=false``) for ``seconds`` simulated
@@ -9,7 +9,7 @@ run and with one subscriber process on every topic the node publishes (this proc
    (``wait_for_command:=true``) until this process has heard it on every per-tick topic and sent
    it one command (the scene's default efforts): a node that published before its subscriber was
    matched would look cheaper than it is;
-2. **bare publish**: :mod:`vjm_ros.ros.bare_publish`, the same messages on the same topics per
+2. **bare publish**: :mod:`benchmarks.bare_publish`, the same messages on the same topics per
    tick from prebuilt messages, as fast as it can; process CPU time per tick;
 3. **physics**: the node's physics (one compiled call per tick for the step, the guard and
    every observable, ``Simulator.advance_block`` of one tick) in this process, CPU time per
@@ -32,10 +32,11 @@ import time
 
 import numpy as np
 
+from benchmarks import ROOT
+from benchmarks.latency import node_command, run_node
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import SampleBlock, Simulator
-from vjm_ros.studies.latency import node_command, run_node
 
 RATE = 1000.0
 
@@ -57,11 +58,11 @@ def physics_per_tick(scene: str, ticks: int = 3000) -> float:
 
 
 def bare_publish_per_tick(scene: str, ticks: int) -> tuple[float, int]:
-    """CPU seconds per tick of :mod:`vjm_ros.ros.bare_publish`, and its number of topics."""
+    """CPU seconds per tick of :mod:`benchmarks.bare_publish`, and its number of topics."""
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     out = subprocess.run(
-        [sys.executable, "-m", "vjm_ros.ros.bare_publish", "--scene", scene, "--ticks", str(ticks)],
-        env=env, capture_output=True, text=True, timeout=600)
+        [sys.executable, "-m", "benchmarks.bare_publish", "--scene", scene, "--ticks", str(ticks)],
+        env=env, cwd=ROOT, capture_output=True, text=True, timeout=600)
     line = next((x for x in out.stdout.splitlines() if x.startswith("bare ")), None)
     if out.returncode != 0 or line is None:
         raise RuntimeError(f"bare_publish failed ({out.returncode}):\n{out.stdout}{out.stderr}")
@@ -96,7 +97,7 @@ def measure(scene: str, seconds: float, repeats: int = 3) -> dict:
     subscriber); the ratio is that of their medians. Single runs of either varied by a third
     from one to the next on a shared machine.
     """
-    from vjm_ros.ros.probes import TopicSink
+    from benchmarks.probes import TopicSink
 
     model = load_scene(scene).model
     efforts = [float(a.effort) for a in model.actuators]
@@ -134,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.node_cost",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.node_cost",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=["four_bar", "five_bar", "three_chain"])
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated s per node run")

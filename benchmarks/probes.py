@@ -1,6 +1,6 @@
 """A probe node for measurements: watches ``/joint_states`` and commands the simulator.
 
-The measurement tools (:mod:`vjm_ros.studies.latency`, :mod:`benchmarks.flood`) run the
+The benchmarks (:mod:`benchmarks.latency`, :mod:`benchmarks.flood` and others) run the
 simulator as a separate process, as users do, and talk to it through this probe: a node in a
 context of its own, spun in a background thread, so that it can be opened and closed inside any
 process (including a test) without touching the global rclpy context.

@@ -1,4 +1,4 @@
-"""Timing of ``vjm_sim_node`` on this machine; re-run with ``python -m vjm_ros.studies.latency``.
+"""Timing of ``vjm_sim_node`` on this machine; re-run with ``python -m benchmarks.latency``.
 
 For each scene, with the node as a separate process (as users run it):
 
@@ -12,7 +12,7 @@ For each scene, with the node as a separate process (as users run it):
 Prints one line per scene, and with ``--json`` one JSON object on the last line. Numbers depend on
 what else runs on the machine: the 1-minute load average is printed with them.
 
-    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m vjm_ros.studies.latency [--scenes four_bar five_bar]
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python -m benchmarks.latency [--scenes four_bar five_bar]
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from vjm_ros.ros.probes import GraphProbe
+from benchmarks.probes import GraphProbe
 from vjm_ros.scene.loader import builtin_scenes, load_scene
 
 
@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     from vjm_ros.jit import tiers
 
     tiers.compile_first()  # times compiled code, never the plain-Python tier
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.studies.latency", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.latency", description=__doc__.split("\n")[0])
     parser.add_argument("--scenes", nargs="*", default=builtin_scenes(), help="built-in names or YAML paths")
     parser.add_argument("--rate", type=float, default=1000.0, help="tick rate, Hz (1000)")
     parser.add_argument("--seconds", type=float, default=10.0, help="realtime run, s (10)")

@@ -1,11 +1,11 @@
 """The floor of the node's publishing cost: the same messages, published by bare rclpy.
 
-``python -m vjm_ros.ros.bare_publish --scene five_bar --ticks 5000`` publishes, per tick, what
+``python -m benchmarks.bare_publish --scene five_bar --ticks 5000`` publishes, per tick, what
 ``vjm_sim_node`` publishes every tick (``/clock``, ``joint_states``, ``~/constraint_forces``, one
 ``~/closures/<name>/wrench`` per closure, ``~/energy``) with the node's names and types, from
 messages built once from a real sample and only re-stamped, as fast as it can. It prints
 ``bare {"ticks": N, "cpu_time": s, "wall_time": s}`` (process CPU time over the publishing loop,
-DDS threads included, as the node's own summary counts it). :mod:`vjm_ros.studies.node_cost`
+DDS threads included, as the node's own summary counts it). :mod:`benchmarks.node_cost`
 compares the node against it.
 """
 
@@ -29,7 +29,7 @@ from vjm_ros.sim.simulator import Simulator
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m vjm_ros.ros.bare_publish",
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bare_publish",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--scene", default="five_bar")
     parser.add_argument("--ticks", type=int, default=5000)
