@@ -203,6 +203,7 @@ def test_the_oversize_studys_command_is_what_rclpy_writes_and_reads(dims, values
 
 
 @pytest.mark.ros
+@pytest.mark.slow  # a live node under the benchmark's stream (about 10 s)
 def test_the_oversize_study_runs_a_node_that_refuses_the_stream():
     """``python -m benchmarks.oversize`` end to end, one second per run: its figures are
     benchmarks (printed, not asserted); what is asserted is that the stream reached the node

@@ -156,6 +156,7 @@ def test_two_runs_at_once_start_one_server_that_outlives_them(toy):
     assert "toy.twice: ok" in log and "done" in log
 
 
+@pytest.mark.slow  # two rounds of a run and a compile (about 9 s)
 def test_signals_to_the_runs_group_leave_the_server_compiling(toy):
     """Ctrl-C or SIGTERM to the run's process group (a terminal, a launcher) ends the run and not
     the server, which compiles what it was asked for after the run has gone."""
@@ -176,6 +177,7 @@ def test_signals_to_the_runs_group_leave_the_server_compiling(toy):
             path.unlink()  # the next round compiles again
 
 
+@pytest.mark.slow  # two servers, one killed mid-compile (about 3 s)
 def test_a_killed_server_leaves_no_stale_lock(toy):
     """The lock is the kernel's ``flock``: a server killed while it compiles holds it no longer,
     and the next run starts a server of its own at once, whatever the lock file still says."""
@@ -239,6 +241,7 @@ def test_compile_server_reports_a_failure(tmp_path, monkeypatch):
     assert "no_such_kernel: error" in (tmp_path / "vjm-compile.log").read_text()
 
 
+@pytest.mark.slow  # a real vjm run and a cold compile (about 6 s)
 def test_a_stopped_vjm_run_leaves_its_server_compiling(tmp_path):
     """``vjm run`` stopped by SIGTERM to its process group (exit 143, outputs written) while its
     server compiles: the server goes on, in a session of its own, and the run names it, once."""

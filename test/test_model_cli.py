@@ -74,6 +74,7 @@ def test_the_docstring_examples_run_and_their_efforts_give_what_they_ask(args):
         assert got["task_singularity_measure"] > 0.1
 
 
+@pytest.mark.slow  # compiles the controllers' model for a scene without closures (about 8 s)
 def test_a_mechanism_without_closures_prints_strict_json():
     got = strict_json(vjm_model("pendulum", "--json").stdout)
     assert got["singularity_measure"] is None

@@ -164,17 +164,35 @@ def test_one_clock_publisher_keeps_simulated_time_increasing():
 
 @pytest.mark.ros
 def test_two_clock_publishers_are_named_by_each_other():
-    def both_warned(probe):
-        return probe.conflicts("/robot1") and probe.conflicts("/robot2")
+    # ~/events is volatile: an event sent before the probe has matched that node's publisher is
+    # not delivered (a loaded machine can take the second of the node's first look at the graph
+    # to match). So the run goes on until one event has come and both nodes have stayed up a few
+    # seconds more; each node's log line is the record that it warned, the events a check of
+    # their text and of "once".
+    def one_warned(probe):
+        return probe.conflicts("/robot1") or probe.conflicts("/robot2")
 
-    probe, publishers, codes, outputs = run_pair((True, True), both_warned)
+    def settled(probe, started=[]):  # noqa: B006 - the time the first event was seen
+        if not one_warned(probe):
+            return False
+        started.append(time.monotonic())
+        return time.monotonic() - started[0] >= 3.0 or (
+            probe.conflicts("/robot1") and probe.conflicts("/robot2"))
+
+    probe, publishers, codes, outputs = run_pair((True, True), settled)
     assert codes == [0, 0], outputs
     assert publishers == [("/robot1", "vjm_sim_node"), ("/robot2", "vjm_sim_node")]
+    heard = 0
     for ns, other, out in zip(ROBOTS, reversed(ROBOTS), outputs, strict=True):
-        (event,) = probe.conflicts(ns)  # once, however many looks at the graph followed
         expected = f"/clock is also published by {other}/vjm_sim_node"
-        assert expected in event, event
-        assert any("WARN" in line and expected in line for line in out.splitlines()), out
+        warnings = [line for line in out.splitlines() if "WARN" in line and expected in line]
+        assert len(warnings) == 1, out  # once, however many looks at the graph followed
+        events = probe.conflicts(ns)
+        assert len(events) <= 1, events
+        for event in events:
+            assert expected in event, event
+            heard += 1
+    assert heard >= 1
     # what the warning is about: the two clocks interleave, and time steps back
     clocks = probe.clocks
     assert any(b < a for a, b in zip(clocks, clocks[1:], strict=False))

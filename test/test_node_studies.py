@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from benchmarks import node_cost
 from vjm_ros.scene.loader import load_scene
 
 
+@pytest.mark.slow  # a live node and a bare publisher measured in turn (about 7 s)
 def test_node_cost_measures_a_node_that_published_every_topic():
     row = node_cost.measure("four_bar", seconds=0.5, repeats=2)
     assert row["ticks"] == 500
