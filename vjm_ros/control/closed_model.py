@@ -56,11 +56,9 @@ from vjm_ros.control.distribution import (
     check_preload,
     distribute,
     inverse_weights,
-    null_direction,
     preload_direction,
 )
 from vjm_ros.control.errors import (
-    ArgumentTypeError,
     InfeasibleEffortsError,
     SingularConfigurationError,
 )
@@ -94,16 +92,7 @@ that, and what it refuses is far beyond any actuator: on five_bar it refuses elb
 than 8e-9 rad, where 1 m/s^2 of the pin needs more than 1e7 N m (1 N m with the elbows bent by
 0.1 rad)."""
 
-__all__ = [
-    "ArgumentTypeError",
-    "ClosedChainModel",
-    "InfeasibleEffortsError",
-    "ReducedDynamics",
-    "SingularConfigurationError",
-    "distribute",
-    "null_direction",
-    "preload_direction",
-]
+__all__ = ["ClosedChainModel", "ReducedDynamics"]
 
 
 @dataclass(frozen=True)
