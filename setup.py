@@ -52,6 +52,9 @@ setup(
         "compare": ["mujoco>=3.2,!=4.0.0"],
         # `vjm sweep` / `vjm tune` on Dask distributed, results as Parquet.
         "sweep": ["distributed>=2024.8", "pyarrow>=15"],
+        # URDF models in (`vjm import`) and the check of the URDF export: a maintained parser
+        # that also computes forward kinematics, so the export is read by code we did not write.
+        "formats": ["yourdfpy>=0.0.56"],
     },
     zip_safe=True,
     maintainer="vjm_ros maintainers",
