@@ -48,11 +48,6 @@ from oracle.mechanism import Mechanism
 
 from vjm_ros.core.compiled import (
     HAVE_NUMBA,
-    FusedExplicitEuler,
-    FusedImplicitPenaltyEuler,
-    FusedRK4,
-    FusedSemiImplicitEuler,
-    fuse_integrator,
     make_mechanism,
 )
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
@@ -348,44 +343,30 @@ def test_singular_mass_matrix_raises_like_numpy():
 
 
 # ---------------------------------------------------------------------------------- integrators
-FUSED = [
-    (ExplicitEuler, FusedExplicitEuler),
-    (SemiImplicitEuler, FusedSemiImplicitEuler),
-    (RK4, FusedRK4),
-    (ImplicitPenaltyEuler, FusedImplicitPenaltyEuler),
-]
+STEPWISE = {  # the oracle's step-by-step methods, written from their textbook definitions
+    "explicit_euler": ExplicitEuler,
+    "semi_implicit_euler": SemiImplicitEuler,
+    "rk4": RK4,
+    "implicit_euler": ImplicitPenaltyEuler,
+}
 
 
 @pytest.mark.parametrize("kind", METHODS)
-@pytest.mark.parametrize("plain,fused", FUSED, ids=[p.name for p, _ in FUSED])
-def test_fused_ticks_match_stepwise(plain, fused, kind):
-    """A compiled tick equals the integrator's own steps on the same mechanism."""
+@pytest.mark.parametrize("name", list(STEPWISE))
+def test_compiled_ticks_match_stepwise(name, kind):
+    """A compiled tick equals the oracle's steps, one evaluation at a time, on the same mechanism."""
     model = _mixed_model(np.random.default_rng(5))
     method = _method(kind, model.n_rows)
     a, b = FastMechanism(model, method), FastMechanism(model, method)
     q, qd = model.initial_state()
     tau = np.linspace(-1.0, 1.0, model.n)
-    qa, va = plain().advance(a, 0.0, q, qd, tau, 1e-3, 3)
-    qb, vb = fused().advance(b, 0.0, q, qd, tau, 1e-3, 3)
+    qa, va = STEPWISE[name]().advance(a, 0.0, q, qd, tau, 1e-3, 3)
+    integrator = make_integrator(name)
+    assert integrator.kernel_method >= 0  # the one compiled call of a whole tick
+    qb, vb = integrator.advance(b, 0.0, q, qd, tau, 1e-3, 3)
     _close(qb, qa)
     _close(vb, va)
     assert a.evaluations == b.evaluations
-
-
-def test_fuse_integrator_choices():
-    """Fixed-step methods on a fast mechanism are fused; anything else is left as it is."""
-    model = load_scene("four_bar").model
-    fast = FastMechanism(model, _method("penalty", model.n_rows))
-    ref = Mechanism(model, _method("penalty", model.n_rows))
-    for name in ("explicit_euler", "semi_implicit_euler", "rk4", "implicit_euler"):
-        plain = make_integrator(name)
-        fused = fuse_integrator(plain, fast)
-        assert fused is not plain and fused.name == plain.name and fused.order == plain.order
-        assert isinstance(fused, type(plain))
-        assert fuse_integrator(plain, ref) is plain
-    adaptive = make_integrator("rk45")
-    assert fuse_integrator(adaptive, fast) is adaptive
-    assert FusedRK4().stability_bound(0.0) == pytest.approx(make_integrator("rk4").stability_bound(0.0))
 
 
 def test_make_mechanism():
@@ -407,13 +388,10 @@ def test_advance_fixed_rejects_unknown_method():
         fast.advance_fixed(99, q, qd, np.zeros(model.n), 1e-3, 1)
 
 
-def _simulator(scene, kind: str, fast: bool) -> Simulator:
+def _simulator(scene, kind: str) -> Simulator:
     gains = dict(scene.gains) if scene.gains.get("method", "penalty") == kind else {}
     settings = SimulationSettings(integrator="rk4", closure=kind, rate=1000.0)
     sim = Simulator(scene.model, settings, gains)
-    if fast:
-        sim.mechanism = FastMechanism(scene.model, sim.method)
-        sim.integrator = fuse_integrator(sim.integrator, sim.mechanism)
     if scene.model.actuators:
         sim.set_efforts(np.full(len(scene.model.actuators), 0.5))
     return sim
@@ -422,20 +400,26 @@ def _simulator(scene, kind: str, fast: bool) -> Simulator:
 @pytest.mark.parametrize("kind", METHODS)
 @pytest.mark.parametrize("name", SCENES)
 def test_one_second_rk4_run(name, kind):
-    """1 s of RK4 at 1 kHz: same trajectory to ``RUN_TOL`` and the same evaluation count."""
+    """1 s of RK4 at 1 kHz, the simulator against the oracle's mechanism stepped by the oracle's
+    RK4: same trajectory to ``RUN_TOL``, the same evaluation count, the same energies and forces."""
     scene = load_scene(name)
-    ref, fast = _simulator(scene, kind, False), _simulator(scene, kind, True)
-    assert isinstance(fast.integrator, FusedRK4)
+    fast = _simulator(scene, kind)
+    assert fast.integrator.kernel_method >= 0
+    ref = Mechanism(scene.model, fast.method)
+    q, qd = scene.model.initial_state()
     for _ in range(1000):
-        ref.advance()
+        q, qd = RK4().advance(ref, 0.0, q, qd, fast.tau, 1e-3, 1)
         fast.advance()
-    assert fast.t == ref.t
-    np.testing.assert_allclose(fast.q, ref.q, rtol=0, atol=RUN_TOL)
-    np.testing.assert_allclose(fast.qd, ref.qd, rtol=0, atol=RUN_TOL)
-    assert fast.mechanism.evaluations == ref.mechanism.evaluations
-    a, b = ref.sample(), fast.sample()
-    np.testing.assert_allclose(b.energy, a.energy, rtol=0, atol=RUN_TOL * max(1.0, np.max(np.abs(a.energy))))
-    np.testing.assert_allclose(b.closure_force, a.closure_force, rtol=1e-6, atol=1e-6)
+    assert fast.t == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(fast.q, q, rtol=0, atol=RUN_TOL)
+    np.testing.assert_allclose(fast.qd, qd, rtol=0, atol=RUN_TOL)
+    assert fast.mechanism.evaluations == ref.evaluations
+    ev = ref.evaluate(q, qd, fast.tau)
+    energy = ref.energies(ev, qd)
+    b = fast.sample()
+    np.testing.assert_allclose(b.energy, energy, rtol=0, atol=RUN_TOL * max(1.0, np.max(np.abs(energy))))
+    forces = fast.mechanism.closures.closure_forces(ev.closure, ev.row_force)
+    np.testing.assert_allclose(b.closure_force, forces, rtol=1e-6, atol=1e-6)
 
 
 def test_kernel_without_compilation():
@@ -443,7 +427,7 @@ def test_kernel_without_compilation():
     script = (
         "import numpy as np\n"
         "from vjm_ros.core.constraints import ExactClosure, PenaltyClosure\n"
-        "from vjm_ros.core.compiled import FusedRK4\n"
+        "from vjm_ros.core.integrators import make_integrator\n"
         "from vjm_ros.core.mechanism import Mechanism as FastMechanism\n"
         "from vjm_ros.scene.loader import load_scene\n"
         "from oracle.fixed import RK4\n"
@@ -459,7 +443,7 @@ def test_kernel_without_compilation():
         "        x, y = a.accelerations(q, qd, tau), b.accelerations(q, qd, tau)\n"
         "        worst = max(worst, np.max(np.abs(x - y)) / np.max(np.abs(x)))\n"
         "        x = RK4().advance(a, 0.0, q, qd, tau, 1e-3, 2)[1]\n"
-        "        y = FusedRK4().advance(b, 0.0, q, qd, tau, 1e-3, 2)[1]\n"
+        "        y = make_integrator('rk4').advance(b, 0.0, q, qd, tau, 1e-3, 2)[1]\n"
         "        worst = max(worst, np.max(np.abs(x - y)) / np.max(np.abs(x)))\n"
         "print(worst)\n"
     )

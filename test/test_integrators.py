@@ -14,7 +14,7 @@ from oracle.fixed import INTEGRATORS as ORACLE_STEPS
 from oracle.fixed import ButcherTableau
 from oracle.mechanism import Mechanism
 
-from vjm_ros.core.compiled import fuse_integrator, make_mechanism
+from vjm_ros.core.compiled import make_mechanism
 from vjm_ros.core.constraints import PenaltyClosure
 from vjm_ros.core.integrators import FIXED_STEP, INTEGRATORS, make_integrator
 from vjm_ros.core.model import (
@@ -80,7 +80,7 @@ def final_state(model, name, steps, duration=1.0, oracle=False):
         mech, integ = Mechanism(model, method), ORACLE_STEPS[name]()
     else:
         mech = make_mechanism(model, method)
-        integ = fuse_integrator(make_integrator(name), mech)
+        integ = make_integrator(name)
         assert integ.kernel_method >= 0  # the compiled path vjm run and the node take
     q1, qd1 = integ.advance(mech, 0.0, q, qd, np.zeros(model.n), duration, steps)
     return np.concatenate((q1, qd1))

@@ -189,13 +189,9 @@ class Simulator:
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
         self.method = closure_method(model, self.settings, self.scene_gains,
                                      self._initial_mobility)
-        from vjm_ros.core.compiled import (  # numba is imported only here
-            fuse_integrator,
-            make_mechanism,
-        )
+        from vjm_ros.core.compiled import make_mechanism  # numba is imported only here
 
         self.mechanism = make_mechanism(model, self.method, self.settings.kernel)
-        self.integrator = fuse_integrator(self.integrator, self.mechanism)
         self.stiffness_report, radius = [], None
         if isinstance(self.method, PenaltyClosure) and model.n_rows:
             self.stiffness_report, radius = closure_modes(
