@@ -282,7 +282,7 @@ def _cmd_run(args) -> int:
         )
     if args.plots and args.out is None:
         raise ConfigurationError("--plots needs --out DIR")
-    sim = Simulator(scene.model, settings, scene.gains)
+    sim = Simulator(scene.model, settings, scene.gains, scene.plant)
     if not tiers.enabled():  # compiled first (the benchmarks): loaded before the clock starts
         sim.blocks_compiled()
     if args.effort is not None:

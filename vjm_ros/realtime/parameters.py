@@ -263,7 +263,7 @@ def build_simulator(
         scene = replace(scene, model=with_initial_positions(scene.model, initial_positions))
     settings = simulation_settings(config, scene)
     try:
-        sim = Simulator(scene.model, settings, scene.gains)
+        sim = Simulator(scene.model, settings, scene.gains, scene.plant)
     except StiffnessError as exc:
         raise StiffnessError(
             f"{exc} (here: the parameters substeps, integrator, closure, kp and kv)") from None

@@ -40,6 +40,14 @@ from vjm_ros.scene.limits import (
     TOP_KEY,
     TOP_KEYS,
 )
+from vjm_ros.scene.plant import (
+    SENSOR_FIELDS,
+    ActuatorDynamics,
+    JointSensors,
+    Plant,
+    SensorChannel,
+    delay_ticks,
+)
 
 _SHORT = reprlib.Repr()
 _SHORT.maxlevel = 3
@@ -66,6 +74,8 @@ class Scene:
         Default run settings (``integrator``, ``rate``, ``substeps``, ``duration``).
     assembly_residual : float
         ``max |C|`` at t = 0 after loading, m or rad.
+    plant : Plant
+        Actuator dynamics and sensors (:mod:`vjm_ros.scene.plant`); pass it to the simulator.
     """
 
     model: Model
@@ -74,6 +84,7 @@ class Scene:
     gains: dict = field(default_factory=dict)
     defaults: dict = field(default_factory=dict)
     assembly_residual: float = 0.0
+    plant: Plant = field(default_factory=Plant)
 
     @property
     def name(self) -> str:
@@ -256,10 +267,12 @@ class SceneBuilder:
         self.link_index = {lk.name: i for i, lk in enumerate(links)}
         self.joint_index = {j.name: i for i, j in enumerate(joints)}
         closures = self.closures(self.section(doc, "closures"))
-        actuators = self.actuators(self.section(doc, "actuators"))
+        actuators, dynamics = self.actuators(self.section(doc, "actuators"))
+        sensors = self.sensors(doc.get("sensors"), joints)
         points = self.points(self.section(doc, "points"), chains, links)
         gains = self.gains(self.section(doc, "closure_method"))
         defaults = self.defaults(self.section(doc, "defaults"))
+        plant = self.plant(dynamics, sensors, defaults)
         model = Model.build(
             name, tuple(chains), tuple(links), tuple(joints), tuple(closures), tuple(actuators),
             tuple(points), gravity, self.text,
@@ -267,7 +280,7 @@ class SceneBuilder:
         )
         self.check_inertia(model)
         model, residual = self.close(model, doc.get("assemble"))
-        return Scene(model, self.source, self.text, gains, defaults, residual)
+        return Scene(model, self.source, self.text, gains, defaults, residual, plant)
 
     def chains(self, value):
         """Chains, links and joints, in scene order."""
@@ -418,12 +431,13 @@ class SceneBuilder:
         return self.joint_index[jname]
 
     def actuators(self, value):
-        """Actuators, one per actuated joint."""
+        """Actuators, one per actuated joint, and their dynamics (gear, lag, delay)."""
         value = self.sequence(value, "actuators")
-        out, seen = [], set()
+        out, seen, dynamics = [], set(), []
         for k, ac in enumerate(value):
             key = f"actuators[{k}]"
-            ac = self.mapping(ac, key, {"joint", "limit", "effort"})
+            ac = self.mapping(
+                ac, key, {"joint", "limit", "effort", "gear", "time_constant", "delay"})
             joint = self.joint_ref(self.require(ac, "joint", key), f"{key}.joint")
             if joint in seen:
                 raise self.fail(f"{key}.joint", "a joint actuated once", ac["joint"])
@@ -433,7 +447,63 @@ class SceneBuilder:
             if abs(effort) > limit:
                 raise self.fail(f"{key}.effort", f"a value within the limit +-{limit:g}", effort)
             out.append(Actuator(joint, limit, effort))
-        return out
+            dynamics.append(ActuatorDynamics(
+                gear=self.number(ac.get("gear", 1.0), f"{key}.gear", positive=True),
+                time_constant=self.number(ac.get("time_constant", 0.0), f"{key}.time_constant",
+                                          minimum=0.0),
+                delay=self.number(ac.get("delay", 0.0), f"{key}.delay", minimum=0.0),
+                key=key))
+        return out, dynamics
+
+    def sensors(self, value, joints) -> JointSensors | None:
+        """The ``sensors`` section: what ``joint_states`` measures (None without it).
+
+        Position and velocity values of a revolute joint are in the file's angle unit (per
+        second), of a prismatic joint in m (per second); effort values in N m or N.
+        """
+        if value is None:
+            return None
+        value = self.mapping(value, "sensors", {"joint_states"})
+        key = "sensors.joint_states"
+        spec = self.mapping(self.require(value, "joint_states", "sensors"), key,
+                            {*SENSOR_FIELDS, "delay", "seed"})
+        channels = []
+        for fname in SENSOR_FIELDS:
+            fkey = f"{key}.{fname}"
+            entry = self.mapping(spec.get(fname) or {}, fkey, {"noise", "bias", "resolution"})
+            noise = self.number(entry.get("noise", 0.0), f"{fkey}.noise", minimum=0.0)
+            bias = self.number(entry.get("bias", 0.0), f"{fkey}.bias")
+            resolution = self.number(entry.get("resolution", 0.0), f"{fkey}.resolution",
+                                     minimum=0.0)
+            scales = [self.angle_scale if fname != "effort" and j.kind == "revolute" else 1.0
+                      for j in joints]
+            channels.append(SensorChannel(tuple(noise * c for c in scales),
+                                          tuple(bias * c for c in scales),
+                                          tuple(resolution * c for c in scales)))
+        delay = self.number(spec.get("delay", 0.0), f"{key}.delay", minimum=0.0)
+        seed = spec.get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+            raise self.fail(f"{key}.seed", "a whole number from 0 to 2**63 - 1", seed)
+        return JointSensors(tuple(channels), delay, seed)
+
+    def plant(self, dynamics, sensors, defaults: dict) -> Plant:
+        """The plant keys; delays checked against ``defaults.rate`` when the scene gives it
+        (the simulator checks them at the rate it runs)."""
+        if "rate" in defaults:
+            delays = [(d.delay, f"{d.key}.delay") for d in dynamics]
+            if sensors is not None:
+                delays.append((sensors.delay, "sensors.joint_states.delay"))
+            for delay, key in delays:
+                try:
+                    delay_ticks(delay, defaults["rate"], "", key)
+                except ValueError:
+                    ticks = delay * defaults["rate"]
+                    raise self.fail(key, "a whole number of ticks at defaults.rate "
+                                    f"{defaults['rate']:g} Hz", f"{delay:g} s = {ticks:g} ticks"
+                                    ) from None
+        if all(not d.dynamic and d.gear == 1.0 for d in dynamics):
+            dynamics = []  # the plain actuators of a scene without these keys
+        return Plant(tuple(dynamics), sensors, self.source)
 
     def points(self, value, chains, links):
         """Chain tips plus the named points of the scene."""

@@ -16,6 +16,8 @@ from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.model import Model
+from vjm_ros.scene.plant import Plant
+from vjm_ros.sim.actuators import Actuation
 from vjm_ros.sim.history import StateHistory
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
@@ -159,6 +161,14 @@ class Simulator:
     scene_gains : dict, optional
         Gains from the scene file (``kp``, ``kv``, ``omega_n``, ``zeta``, ``alpha``, ``beta``,
         per-closure overrides under ``per_closure``); settings take precedence.
+    plant : Plant, optional
+        The scene's actuator dynamics and sensors (:attr:`Scene.plant
+        <vjm_ros.scene.builder.Scene.plant>`); none by default.
+
+    Raises
+    ------
+    ConfigurationError
+        A setting cannot be used, or a delay of the plant is not a whole number of ticks.
     """
 
     def __init__(
@@ -166,12 +176,16 @@ class Simulator:
         model: Model,
         settings: SimulationSettings | None = None,
         scene_gains: dict | None = None,
+        plant: Plant | None = None,
     ):
         self.model = model
         self.settings = (settings or SimulationSettings()).validated()
         self.scene_gains = dict(scene_gains or {})
         self.dt = 1.0 / self.settings.rate
         self.h = self.dt / self.settings.substeps
+        self.plant = plant or Plant()
+        self.actuation = Actuation(model, self.plant.actuators, self.dt, self.plant.source)
+        """Commands to applied efforts (:mod:`vjm_ros.sim.actuators`)."""
         self.integrator = (
             make_integrator(
                 self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
@@ -180,7 +194,7 @@ class Simulator:
             else make_integrator(self.settings.integrator)
         )
         self.q0, self.qd0 = model.initial_state()
-        self.selection = model.actuator_matrix()
+        self.selection = self.actuation.selection  # joint effort per unit of command
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self._closure_rows = model.n_rows
         self._mobility: np.ndarray | None = None  # G at the initial state, when first asked
@@ -232,20 +246,25 @@ class Simulator:
         self.qd = self.qd0.copy()
         self.efforts = np.zeros(len(self.model.actuators))
         self.tau = np.zeros(self.model.n)
+        self.actuation.reset()
         self.integrator.reset()
 
     def set_efforts(self, efforts: np.ndarray) -> np.ndarray:
-        """Hold actuator efforts for the following ticks, clamped to the scene's limits.
+        """Hold actuator commands for the following ticks, clamped to the scene's limits.
+
+        Without actuator dynamics the joints receive ``gear * command`` from the next tick on
+        (:attr:`tau` at once); with a lag or a delay :attr:`tau` follows tick by tick
+        (:mod:`vjm_ros.sim.actuators`).
 
         Parameters
         ----------
         efforts : array_like, shape (n_actuators,)
-            N m or N, in the scene's actuator order.
+            Commands, N m or N before the gear, in the scene's actuator order.
 
         Returns
         -------
         ndarray, shape (n_actuators,)
-            The efforts as applied (after clamping).
+            The commands as held (after clamping).
         """
         e = np.asarray(efforts, dtype=float).reshape(-1)
         if e.shape != (len(self.model.actuators),):
@@ -257,7 +276,8 @@ class Simulator:
             raise ConfigurationError(f"efforts: expected finite values, found {e.tolist()}")
         e = np.clip(e, -self.limits, self.limits)
         self.efforts = e
-        self.tau = self.selection @ e
+        if not self.actuation.dynamic:
+            self.tau = self.selection @ e
         return e
 
     def advance(self, efforts: np.ndarray | None = None) -> None:
@@ -275,6 +295,12 @@ class Simulator:
         """
         if efforts is not None:
             self.set_efforts(efforts)
+        if self.actuation.dynamic:
+            self.tau = self.actuation.tick(self.efforts)
+        self._step()
+
+    def _step(self) -> None:
+        """One tick with :attr:`tau` held (:meth:`advance` without the actuators' tick)."""
         self._history.append(self.t, self.q, self.qd)
         with np.errstate(all="ignore"):
             try:
@@ -315,11 +341,12 @@ class Simulator:
         return True
 
     def advance_block(self, block: SampleBlock, ticks: int) -> None:
-        """``ticks`` control ticks with the efforts held, each sampled into ``block``.
+        """``ticks`` control ticks with the commands held, each sampled into ``block``.
 
         The same states and samples as ``advance()`` then ``sample()`` per tick; with a compiled
         fixed-step integrator all ticks run in one compiled call
-        (:func:`vjm_ros.core.pipeline.advance_ticks`), else tick by tick.
+        (:func:`vjm_ros.core.pipeline.advance_ticks`), else tick by tick. With actuator
+        dynamics, one call per tick until the actuators have settled (:meth:`_advance_actuated`).
 
         Parameters
         ----------
@@ -333,13 +360,24 @@ class Simulator:
         DivergenceError
             As :meth:`advance`; the block then holds the ticks before the failing one.
         """
-        block.effort = self.tau.copy()
         block.rows = 0
+        if self.actuation.dynamic:
+            self._advance_actuated(block, ticks)
+            return
+        block.effort = self.tau.copy()
         if ticks == 0 or not self.runs_blocks():
             self._advance_tick_by_tick(block, 0, ticks)
             return
-        arrays = (block.arrays if ticks == len(block.t)
-                  else tuple(a[:ticks] for a in block.arrays))
+        if self._advance_rows(block, 0, ticks):
+            # The failing tick again, tick by tick: it raises with the full diagnosis.
+            self._advance_tick_by_tick(block, block.rows, ticks)
+
+    def _advance_rows(self, block: SampleBlock, first: int, ticks: int) -> int:
+        """Rows ``first .. first + ticks - 1`` of ``block`` in one compiled call, :attr:`tau`
+        held; ``block.rows`` is set to the rows filled. Returns the pipeline's code (non-zero:
+        the tick after the rows filled failed)."""
+        arrays = (block.arrays if first == 0 and ticks == len(block.t)
+                  else tuple(a[first:first + ticks] for a in block.arrays))
         rows = self._closure_rows  # the model's, counted once (a property that sums)
         project = isinstance(self.method, ExactClosure) and self.method.projection and rows > 0
         limit = self.divergence_limit if (rows and self.divergence_limit) else np.inf
@@ -351,21 +389,51 @@ class Simulator:
             self._point_local, arrays)
         # the states the ticks started from, for the diagnosis of a divergence (self.q is
         # replaced below, never changed in place)
+        last = first + done
         if done == 1:  # the node's tick
             self._history.append(start * self.dt, self.q, self.qd)
-            block.t[0] = (start + 1) * self.dt
+            block.t[first] = (start + 1) * self.dt
         else:
-            self._history.add_block(start, self.dt, self.q, self.qd, block.q[:done],
-                                    block.qd[:done])
-            block.t[:done] = (start + 1 + np.arange(done)) * self.dt
-        block.rows = done
+            self._history.add_block(start, self.dt, self.q, self.qd, block.q[first:last],
+                                    block.qd[first:last])
+            block.t[first:last] = (start + 1 + np.arange(done)) * self.dt
+        block.rows = last
         if done:
-            self.q, self.qd = block.q[done - 1].copy(), block.qd[done - 1].copy()
+            self.q, self.qd = block.q[last - 1].copy(), block.qd[last - 1].copy()
         self.ticks = start + done
         self.t = self.ticks * self.dt
-        if code:
-            # The failing tick again, tick by tick: it raises with the full diagnosis.
-            self._advance_tick_by_tick(block, done, ticks)
+        return code
+
+    def _advance_actuated(self, block: SampleBlock, ticks: int) -> None:
+        """:meth:`advance_block` with actuator dynamics: the applied efforts change tick by tick
+        (one compiled call each) until the actuators have settled on the command held, then the
+        rest of the block runs in one call. ``block.effort`` gets one row per tick (one row
+        held over a block of one tick)."""
+        per_row = ticks > 1
+        block.effort = np.empty((len(block.t), self.model.n)) if per_row else self.tau.copy()
+        compiled = ticks > 0 and self.runs_blocks()
+        first = 0
+        while first < ticks:
+            count, code = 1, 0
+            if compiled and self.actuation.settled(self.efforts):
+                self.tau, count = self.selection @ self.efforts, ticks - first
+            else:
+                self.tau = self.actuation.tick(self.efforts)
+            if compiled:
+                code = self._advance_rows(block, first, count)
+            else:
+                self._step()
+                block.put(first, self.sample())
+                block.rows = first + 1
+            if code:  # the failing tick again, with its efforts: it raises with the diagnosis
+                self._step()
+                block.put(block.rows, self.sample())
+                block.rows += 1
+            if per_row:
+                block.effort[first:block.rows] = self.tau
+            else:
+                block.effort = self.tau.copy()
+            first = block.rows
 
     def _advance_tick_by_tick(self, block: SampleBlock, first: int, ticks: int) -> None:
         """Rows ``first .. ticks - 1`` of ``block``, tick by tick."""

@@ -77,7 +77,10 @@ class Trajectory:
         self._reserve(rows)
         i, b = self._rows, self._buf
         for key, _ in _SAMPLE_FIELDS:
-            b[key][i : i + rows] = block.effort if key == "effort" else getattr(block, key)[:rows]
+            if key == "effort":  # held over the block, or one row per tick
+                b[key][i : i + rows] = block.effort[:rows] if block.effort.ndim == 2 else block.effort
+            else:
+                b[key][i : i + rows] = getattr(block, key)[:rows]
         self._rows += rows
 
     def __getitem__(self, key: str) -> np.ndarray:
