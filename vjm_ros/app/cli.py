@@ -129,9 +129,10 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("rest", nargs=argparse.REMAINDER)
     tu = sub.add_parser("tune", help="penalty gains for an integrator and step", add_help=False)
     tu.add_argument("rest", nargs=argparse.REMAINDER)
-    from vjm_ros.app import model_cli
+    from vjm_ros.app import import_cli, model_cli
 
     model_cli.add_parser(sub)
+    import_cli.add_parser(sub)
     rp = sub.add_parser("replay", help="rerun recording from an MCAP log")
     rp.add_argument("mcap", type=Path)
     rp.add_argument("-o", "--output", type=Path, help="output .rrd (default: next to the log)")
@@ -178,6 +179,10 @@ def _main(argv: list[str] | None) -> int:
             from vjm_ros.app import model_cli
 
             return model_cli.run(args)
+        if args.command == "import":
+            from vjm_ros.app import import_cli
+
+            return import_cli.run(args)
         if args.command == "replay":
             from vjm_ros.logs.replay import replay
 
@@ -297,7 +302,8 @@ def _cmd_run(args) -> int:
     if args.out is not None:
         _prepare_dir(args.out)
 
-    traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2)
+    traj = Trajectory(scene.model, capacity=int(duration * settings.rate) + 2,
+                      measured=sim.sensors is not None)
     ticks = int(round(duration * settings.rate))
     progress = Progress(duration, sys.stderr.isatty() and sys.stdout.isatty())
     # Installed before any log is opened: from here on a signal ends the run between two blocks

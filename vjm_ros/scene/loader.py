@@ -17,7 +17,7 @@ however malformed, is accepted or refused within a fraction of a second.
 
 from __future__ import annotations
 
-from importlib import resources
+from importlib import import_module, resources
 from pathlib import Path
 
 from vjm_ros.core.errors import SceneError
@@ -51,14 +51,23 @@ def builtin_scene_text(name: str) -> str:
     return (resources.files("vjm_ros.scene") / "builtin" / f"{name}.yaml").read_text(encoding="utf-8")
 
 
+MODEL_SUFFIXES = (".sdf", ".urdf", ".xml")
+"""Extensions of model files of other formats (SDFormat, URDF, MJCF), read as scenes by
+:data:`MODEL_READER`."""
+MODEL_READER = "vjm_ros.formats.importing"
+"""The module whose ``load_model_scene(path)`` reads them. ``vjm_ros.formats`` sits above this
+layer (it builds scene documents with it), so it is found by name when a model path is loaded."""
+
+
 def load_scene(spec: str | Path) -> Scene:
-    """Load a built-in scene by name, or a YAML file by path.
+    """Load a built-in scene by name, a YAML file by path, or a model of another format.
 
     Parameters
     ----------
     spec : str or Path
-        A name from :func:`builtin_scenes` or the path of a UTF-8 YAML file of at most
-        :data:`MAX_SCENE_BYTES` bytes.
+        A name from :func:`builtin_scenes`, the path of a UTF-8 YAML file of at most
+        :data:`MAX_SCENE_BYTES` bytes, or the path of a ``.sdf``, ``.urdf`` or MJCF ``.xml``
+        model (docs/models.md).
 
     Returns
     -------
@@ -72,6 +81,8 @@ def load_scene(spec: str | Path) -> Scene:
     spec_s = str(spec)
     if spec_s in builtin_scenes():
         return parse_scene(builtin_scene_text(spec_s), source=f"<builtin {spec_s}>")
+    if spec_s.lower().endswith(MODEL_SUFFIXES):
+        return import_module(MODEL_READER).load_model_scene(spec_s)
     return parse_scene(_read_file(spec_s), source=spec_s)
 
 
