@@ -86,7 +86,11 @@ class Outputs(Protocol):
         """Simulated time ``t`` (s), every tick."""
 
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
-        """Joint positions, rates and applied efforts at simulated time ``t`` (s), shape (n,)."""
+        """Joint positions, rates and applied efforts at simulated time ``t`` (s), shape (n,):
+        as the scene's sensors measure them, or exact without sensors."""
+
+    def ground_truth(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        """The exact joint state beside :meth:`joints`, only when the scene has sensors."""
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Constraint forces and energy of a sample, stamped ``t`` (s)."""
@@ -396,8 +400,7 @@ class TickLoop:
             self._mark_start()
             self.outputs.notice("started", f"first command: running from t = {self.time:.6g} s")
             return
-        sim = self.sim
-        self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
+        self._joints(self.time)
         self._periodic()
 
     def _mark_start(self) -> None:
@@ -489,7 +492,7 @@ class TickLoop:
         if opts.publish_clock:
             outputs.clock(t)
         if sim.ticks % opts.publish_every == 0:
-            outputs.joints(t, sim.q, sim.qd, sim.tau)
+            self._joints(t)
         if sample is not None:
             if forces:
                 outputs.dynamics(sample, t)
@@ -531,12 +534,23 @@ class TickLoop:
             return True
         return False
 
+    def _joints(self, t: float) -> None:
+        """The simulator's joint state stamped ``t`` (s): measured, and exact beside it, when
+        the scene has sensors."""
+        sim = self.sim
+        if sim.measured is None:
+            self.outputs.joints(t, sim.q, sim.qd, sim.tau)
+            return
+        measured = sim.measured
+        self.outputs.joints(t, measured[0], measured[1], measured[2])
+        self.outputs.ground_truth(t, sim.q, sim.qd, sim.tau)
+
     def _emit(self, sample: Sample) -> None:
         """Outputs of a state that starts an episode (t = 0)."""
         t = self._published(sample.t)
         if self.options.publish_clock:
             self.outputs.clock(t)
-        self.outputs.joints(t, sample.q, sample.qd, sample.effort)
+        self._joints(t)
         self.outputs.dynamics(sample, t)
         self.monitor.observe(sample)
         if self.recorders:
@@ -580,8 +594,7 @@ class TickLoop:
         if not self._paused:
             self.pacer.restart()
             if self.options.lockstep:  # give the controller a state to answer
-                sim = self.sim
-                self.outputs.joints(self.time, sim.q, sim.qd, sim.tau)
+                self._joints(self.time)
 
     def _interrupted_while_paused(self) -> bool:
         return self._stop or not self._paused or self._resets_asked > self._resets_done

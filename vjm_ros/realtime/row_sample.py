@@ -33,4 +33,5 @@ class RowSample:
         s.power_in = float(self._power[0])
         s.dissipation = float(self._dissipation[0])
         s.sigma_min = math.nan
+        s.measured = None if b.measured is None else b.measured[0]
         return s

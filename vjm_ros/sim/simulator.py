@@ -19,6 +19,7 @@ from vjm_ros.core.model import Model
 from vjm_ros.scene.plant import Plant
 from vjm_ros.sim.actuators import Actuation
 from vjm_ros.sim.history import StateHistory
+from vjm_ros.sim.sensors import SensorModel
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.stiffness import (
     check_stiffness,
@@ -58,6 +59,9 @@ class Sample:
         Link start/end points for drawing, m (None when taken without geometry).
     sigma_min : float
         Smallest singular value of the closure Jacobian (nan when not computed).
+    measured : ndarray, shape (3, n), or None
+        Position, velocity and effort as the scene's sensors measure them
+        (:mod:`vjm_ros.sim.sensors`); None without sensors.
     """
 
     t: float
@@ -75,6 +79,7 @@ class Sample:
     dissipation: float
     segments: np.ndarray | None
     sigma_min: float = field(default=np.nan)
+    measured: np.ndarray | None = None
 
     @property
     def max_closure_error(self) -> float:
@@ -111,6 +116,8 @@ class SampleBlock:
     q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation, segments
         As the fields of :class:`Sample`, with a leading tick axis (the layout of
         :mod:`vjm_ros.core.pipeline`).
+    measured : ndarray, shape (T, 3, n), or None
+        As :attr:`Sample.measured`, one row per tick (None without sensors).
     """
 
     def __init__(self, model: Model, capacity: int):
@@ -120,6 +127,7 @@ class SampleBlock:
             setattr(self, key, arr)
         self.t = np.zeros(capacity)
         self.effort = np.zeros(model.n)
+        self.measured: np.ndarray | None = None
         self.rows = 0
 
     def __len__(self) -> int:
@@ -134,7 +142,8 @@ class SampleBlock:
     def sample(self, i: int) -> Sample:
         """Row ``i`` as a :class:`Sample` of its own (copies: the block is refilled later)."""
         effort = self.effort[i] if self.effort.ndim == 2 else self.effort
-        return Sample(t=float(self.t[i]), effort=effort.copy(),
+        measured = None if self.measured is None else self.measured[i].copy()
+        return Sample(t=float(self.t[i]), effort=effort.copy(), measured=measured,
                       **{attr: getattr(self, key)[i].copy() for key, attr in BLOCK_FIELDS})
 
 
@@ -186,6 +195,12 @@ class Simulator:
         self.plant = plant or Plant()
         self.actuation = Actuation(model, self.plant.actuators, self.dt, self.plant.source)
         """Commands to applied efforts (:mod:`vjm_ros.sim.actuators`)."""
+        self.sensors = (None if self.plant.sensors is None
+                        else SensorModel(self.plant.sensors, self.dt, self.plant.source))
+        """The joint sensors (:mod:`vjm_ros.sim.sensors`), or None."""
+        self.measured: np.ndarray | None = None
+        """The latest measurement, shape (3, n): position, velocity, effort (None without
+        sensors)."""
         self.integrator = (
             make_integrator(
                 self.settings.integrator, rtol=self.settings.rtol, atol=self.settings.atol
@@ -248,6 +263,12 @@ class Simulator:
         self.tau = np.zeros(self.model.n)
         self.actuation.reset()
         self.integrator.reset()
+        if self.sensors is not None:
+            self.measured = self.sensors.reset(self._exact_state())
+
+    def _exact_state(self) -> np.ndarray:
+        """Position, velocity and applied effort now, shape (3, n)."""
+        return np.stack((self.q, self.qd, self.tau))
 
     def set_efforts(self, efforts: np.ndarray) -> np.ndarray:
         """Hold actuator commands for the following ticks, clamped to the scene's limits.
@@ -295,9 +316,15 @@ class Simulator:
         """
         if efforts is not None:
             self.set_efforts(efforts)
+        self._tick_actuators()
+        self._step()
+        if self.sensors is not None:
+            self.measured = self.sensors.measure(self._exact_state()[None])[0]
+
+    def _tick_actuators(self) -> None:
+        """The efforts of the next tick (:attr:`tau`), when the actuators have dynamics."""
         if self.actuation.dynamic:
             self.tau = self.actuation.tick(self.efforts)
-        self._step()
 
     def _step(self) -> None:
         """One tick with :attr:`tau` held (:meth:`advance` without the actuators' tick)."""
@@ -361,16 +388,33 @@ class Simulator:
             As :meth:`advance`; the block then holds the ticks before the failing one.
         """
         block.rows = 0
-        if self.actuation.dynamic:
-            self._advance_actuated(block, ticks)
+        try:
+            if self.actuation.dynamic:
+                self._advance_actuated(block, ticks)
+                return
+            block.effort = self.tau.copy()
+            if ticks == 0 or not self.runs_blocks():
+                self._advance_tick_by_tick(block, 0, ticks)
+                return
+            if self._advance_rows(block, 0, ticks):
+                # The failing tick again, tick by tick: it raises with the full diagnosis.
+                self._advance_tick_by_tick(block, block.rows, ticks)
+        finally:  # also the rows before a divergence
+            if self.sensors is not None:
+                self._measure_block(block)
+
+    def _measure_block(self, block: SampleBlock) -> None:
+        """``block.measured`` of the rows filled (:attr:`sensors`)."""
+        rows, n = block.rows, self.model.n
+        if block.measured is None or len(block.measured) != len(block.t):
+            block.measured = np.zeros((len(block.t), 3, n))
+        if not rows:
             return
-        block.effort = self.tau.copy()
-        if ticks == 0 or not self.runs_blocks():
-            self._advance_tick_by_tick(block, 0, ticks)
-            return
-        if self._advance_rows(block, 0, ticks):
-            # The failing tick again, tick by tick: it raises with the full diagnosis.
-            self._advance_tick_by_tick(block, block.rows, ticks)
+        effort = (block.effort[:rows] if block.effort.ndim == 2
+                  else np.broadcast_to(block.effort, (rows, n)))
+        exact = np.stack((block.q[:rows], block.qd[:rows], effort), axis=1)
+        block.measured[:rows] = self.sensors.measure(exact)
+        self.measured = block.measured[rows - 1].copy()
 
     def _advance_rows(self, block: SampleBlock, first: int, ticks: int) -> int:
         """Rows ``first .. first + ticks - 1`` of ``block`` in one compiled call, :attr:`tau`
@@ -438,7 +482,8 @@ class Simulator:
     def _advance_tick_by_tick(self, block: SampleBlock, first: int, ticks: int) -> None:
         """Rows ``first .. ticks - 1`` of ``block``, tick by tick."""
         for i in range(first, ticks):
-            self.advance()
+            self._tick_actuators()
+            self._step()
             block.put(i, self.sample())
             block.rows = i + 1
 
@@ -570,6 +615,7 @@ class Simulator:
             dissipation=dissipation,
             segments=segments,
             sigma_min=sigma,
+            measured=None if self.measured is None else self.measured.copy(),
         )
 
     def describe(self) -> dict:

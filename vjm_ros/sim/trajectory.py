@@ -4,7 +4,9 @@ The columns of ``trajectory.csv`` are a contract (docs/design.md section 5): ``t
 ``q.<joint>``, ``qd.<joint>``, ``qdd.<joint>``, ``effort.<joint>``; per link ``theta.<link>``; per
 named point ``x.<point>``, ``y.<point>``; per closure ``f.<closure>.x``, ``f.<closure>.y`` (or
 ``f.<closure>.z`` for a torque); ``energy.kinetic``, ``energy.potential``, ``energy.constraint``,
-``energy.total``, ``closure_error``.
+``energy.total``, ``closure_error``; and, for a scene with sensors, per joint
+``measured.q.<joint>``, ``measured.qd.<joint>``, ``measured.effort.<joint>`` (what the node
+publishes on ``joint_states``; the columns before them are the exact state).
 """
 
 from __future__ import annotations
@@ -42,15 +44,19 @@ class Trajectory:
     model : Model
     capacity : int
         Initial number of rows reserved (grows as needed).
+    measured : bool
+        Also keep the sensors' measurements (:attr:`~vjm_ros.sim.simulator.Sample.measured`)
+        and write them as the ``measured.*`` columns.
     """
 
-    def __init__(self, model: Model, capacity: int = 1024):
+    def __init__(self, model: Model, capacity: int = 1024, measured: bool = False):
         self.model = model
         self._rows = 0
         shapes = dict(zip(OBSERVABLES, observable_shapes(
             model.n, len(model.points), len(model.closures)), strict=True))
-        shapes.update(t=(), effort=(model.n,))
-        self._buf = {key: np.zeros((capacity,) + shapes[key]) for key, _ in _SAMPLE_FIELDS}
+        shapes.update(t=(), effort=(model.n,), measured=(3, model.n))
+        self._fields = _SAMPLE_FIELDS + ((("measured", "measured"),) if measured else ())
+        self._buf = {key: np.zeros((capacity,) + shapes[key]) for key, _ in self._fields}
 
     def __len__(self) -> int:
         return self._rows
@@ -66,7 +72,7 @@ class Trajectory:
         self._reserve(1)
         i = self._rows
         b = self._buf
-        for key, attr in _SAMPLE_FIELDS:
+        for key, attr in self._fields:
             b[key][i] = getattr(s, attr)
         self._rows += 1
 
@@ -76,7 +82,7 @@ class Trajectory:
         rows = len(block)
         self._reserve(rows)
         i, b = self._rows, self._buf
-        for key, _ in _SAMPLE_FIELDS:
+        for key, _ in self._fields:
             if key == "effort":  # held over the block, or one row per tick
                 b[key][i : i + rows] = block.effort[:rows] if block.effort.ndim == 2 else block.effort
             else:
@@ -85,7 +91,8 @@ class Trajectory:
 
     def __getitem__(self, key: str) -> np.ndarray:
         """Stored array by name (``t``, ``q``, ``qd``, ``qdd``, ``effort``, ``theta``, ``points``,
-        ``force``, ``error``, ``energy``, ``power``, ``dissipation``, ``segments``)."""
+        ``force``, ``error``, ``energy``, ``power``, ``dissipation``, ``segments``; ``measured``,
+        shape (rows, 3, n), when kept)."""
         return self._buf[key][: self._rows]
 
     # ------------------------------------------------------------------ measures
@@ -170,6 +177,9 @@ class Trajectory:
         for c in m.closures:
             cols += [f"f.{c.name}.z"] if c.kind == ANGLE else [f"f.{c.name}.x", f"f.{c.name}.y"]
         cols += [f"energy.{e}" for e in ENERGY_NAMES] + ["closure_error"]
+        if "measured" in self._buf:
+            for j in m.joint_names:
+                cols += [f"measured.q.{j}", f"measured.qd.{j}", f"measured.effort.{j}"]
         return cols
 
     def table(self, start: int = 0, stop: int | None = None) -> np.ndarray:
@@ -195,6 +205,8 @@ class Trajectory:
         parts.append(self["energy"][rows])
         err = self["error"][rows]
         parts.append((err.max(axis=1) if err.shape[1] else np.zeros(count))[:, None])
+        if "measured" in self._buf:  # (rows, 3, n) -> per joint: q, qd, effort
+            parts.append(self["measured"][rows].transpose(0, 2, 1).reshape(count, -1))
         return np.concatenate(parts, axis=1)
 
     def write_csv(self, path: str | Path) -> Path:
