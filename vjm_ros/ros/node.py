@@ -28,6 +28,9 @@ topic                           type                                      when
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
 ==============================  ========================================  =========================
 
+A scene with ``sensors`` publishes on ``joint_states`` what its sensors measure, and the exact
+state beside it on ``~/ground_truth/joint_states`` (``sensor_msgs/JointState``, same times).
+
 Message layouts: :mod:`vjm_ros.ros.conversions` (the per-tick ones published as serialized bytes, :mod:`vjm_ros.ros.wire`). Header stamps are simulated time, which only
 increases (also across ``~/reset``); the node itself runs on the wall clock (it publishes
 ``/clock`` but does not use it). Services: ``~/pause``
@@ -218,6 +221,7 @@ class SimNode(Node):
                                    self.get_namespace())
         self._throttle = Throttle(WARNING_PERIOD)
         self._make_publishers()
+        self._send_truth = self._open_ground_truth() if sim.sensors is not None else None
         self._clock_owner = ClockOwner(self, self.notice, self.config.publish_clock)
         self._wrench_pubs: dict[str, object] = {}
         self._adopt(sim.model)
@@ -352,6 +356,16 @@ class SimNode(Node):
     def joints(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
         """Publish ``/joint_states``."""
         self._send_joints(self._wire.joint_state(t, q, qd, effort))
+
+    def ground_truth(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> None:
+        """Publish ``~/ground_truth/joint_states``: the exact state, when ``joint_states``
+        carries what the scene's sensors measure."""
+        if self._send_truth is None:  # a scene with sensors adopted at a reset
+            self._send_truth = self._open_ground_truth()
+        self._send_truth(self._wire.joint_state(t, q, qd, effort))
+
+    def _open_ground_truth(self):
+        return raw_publish(self.create_publisher(JointState, "~/ground_truth/joint_states", 10))
 
     def dynamics(self, sample: Sample, t: float) -> None:
         """Publish the constraint forces, wrenches (stamped ``t``, s) and energy of a sample."""
