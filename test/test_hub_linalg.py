@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from oracle.mechanism import Mechanism as OracleMechanism
 
-from vjm_ros.core import hub_linalg, kernels, pipeline, small_linalg
+from vjm_ros.core import hub_linalg, kernels, layout, pipeline, small_linalg
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.packing import HUB_MIN_GROUPS, chain_blocks, closure_layout
@@ -52,8 +52,8 @@ def _pair(model, method):
     and with the dense solves."""
     blocks = chain_blocks(model)
     hub, dense = Mechanism(model, method), Mechanism(model, method)
-    hub._data = kernels.make_data(hub.packed, closure_layout(model, blocks, min_groups=1))
-    dense._data = kernels.make_data(dense.packed)
+    hub._data = layout.make_data(hub.packed, closure_layout(model, blocks, min_groups=1))
+    dense._data = layout.make_data(dense.packed)
     assert hub._data.layout[model.n_rows, 0] >= 0
     # the compiled copies that hold the hub solves (the plain ones solve densely)
     hub._step, hub._advance_ticks = kernels.step_with_hub, pipeline.advance_ticks_with_hub
@@ -79,7 +79,7 @@ def _hub_taken(model, q, rcond=1e-10):
     packed = Mechanism.reader(model).packed
     blocks = packed.blocks
     n, r = model.n, model.n_rows
-    data = kernels.make_data(packed, closure_layout(model, blocks, min_groups=1))
+    data = layout.make_data(packed, closure_layout(model, blocks, min_groups=1))
     lu, piv, minv_at, g, v, vec = data.lu, data.piv, data.minv_at, data.g, data.v, data.vec
     lu[:] = dyn.mass_matrix
     assert small_linalg.lu_factor_blocks(lu, piv, blocks) == 0

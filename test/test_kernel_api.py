@@ -18,6 +18,7 @@ import pytest
 from vjm_ros.control import ClosedChainModel
 from vjm_ros.control.compiled import velocity_map
 from vjm_ros.core import kernels as K
+from vjm_ros.core import layout
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.scene.loader import load_scene
@@ -36,9 +37,9 @@ def test_named_entry_points_are_what_the_mechanism_computes(closure):
     method = ExactClosure() if closure == "exact" else PenaltyClosure(np.full(r, 1e5),
                                                                       np.full(r, 1e2))
     mech = Mechanism(model, method)
-    assert isinstance(mech.packed, K.PackedModel)
+    assert isinstance(mech.packed, layout.PackedModel)
     data = mech.new_data()
-    assert isinstance(data, K.Data) and data.mm.shape == (model.n, model.n)
+    assert isinstance(data, layout.Data) and data.mm.shape == (model.n, model.n)
     q, qd = _state(model, 1)
     tau = np.linspace(-1.0, 1.0, model.n)
     out, out_b = np.empty(model.n), np.empty(model.n)
@@ -54,7 +55,7 @@ def test_named_entry_points_are_what_the_mechanism_computes(closure):
     for a, b in zip((out, out_b), mech.project(q, qd), strict=True):
         np.testing.assert_array_equal(a, b)
     assert K.residual(mech.packed, data, q) == 0
-    np.testing.assert_array_equal(data.crow[:, K.R_RES], mech.terms(q, jacobian=False)[1].residual)
+    np.testing.assert_array_equal(data.crow[:, layout.R_RES], mech.terms(q, jacobian=False)[1].residual)
 
 
 def test_one_packed_model_serves_threads_with_a_workspace_each():

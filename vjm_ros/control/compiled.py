@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from vjm_ros.core import kernels as K
+from vjm_ros.core import layout
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.model import Model
 
@@ -98,14 +99,14 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
     r = dependent.shape[0]
     m = actuated.shape[0]
     for i in range(r):
-        if abs(crow[i, K.R_RES]) > closure_tolerance:
+        if abs(crow[i, layout.R_RES]) > closure_tolerance:
             return OFF_CLOSURES
     for i in range(r):
-        if abs(crow[i, K.R_RATE]) > velocity_tolerance:
+        if abs(crow[i, layout.R_RATE]) > velocity_tolerance:
             return OFF_VELOCITIES
     s_map = np.empty((n, d))
     s_bias = np.empty(n)
-    if velocity_map(jac, crow[:, K.R_BIAS], independent, dependent, singular_tolerance, s_map,
+    if velocity_map(jac, crow[:, layout.R_BIAS], independent, dependent, singular_tolerance, s_map,
                     s_bias) < singular_tolerance:
         return SINGULAR
     force = mm @ (s_map @ udd + s_bias) + bias

@@ -1,6 +1,6 @@
 """Loop closures: the two ways to enforce them, their rows, and the modes of penalty closures.
 
-Rows (docs/design.md section 2; computed by :func:`vjm_ros.core.kernels.terms`):
+Rows (docs/design.md section 2; computed by :func:`vjm_ros.core.terms.terms`):
 
 * ``hinge``: ``C = Pa - Pb`` (2 rows, m);
 * ``slider``: ``C = (Pa - P0) . n_d`` with ``n_d = e_z x d`` the line normal (1 row, m); the line

@@ -3,7 +3,7 @@
 :class:`Kinematics` holds the kernel's link frames and rates
 (:meth:`vjm_ros.core.mechanism.Mechanism.kinematics`, or the ``dyn.kin`` of an evaluation); the
 functions here only read them: points given in link frames, the links and ground links as
-segments for drawing. The recursions themselves are in :func:`vjm_ros.core.kernels.terms`.
+segments for drawing. The recursions themselves are in :func:`vjm_ros.core.terms.terms`.
 """
 
 from __future__ import annotations

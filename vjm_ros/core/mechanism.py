@@ -5,7 +5,7 @@ studies see. Every quantity comes from the scalar chain recursions of :mod:`vjm_
 (compiled by numba, or run as plain Python where numba is missing) through its entry points
 (:func:`~vjm_ros.core.kernels.evaluate`, :func:`~vjm_ros.core.kernels.project`, ...) on the
 packed model (:attr:`Mechanism.packed`) and the instance's workspace
-(:class:`~vjm_ros.core.kernels.Data`):
+(:class:`~vjm_ros.core.layout.Data`):
 
 * ``accelerations``, ``implicit_penalty_velocity``, ``evaluate``, ``energies`` and ``project``:
   the equations of motion (docs/design.md sections 1-2);
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vjm_ros.core import kernels as K
-from vjm_ros.core import pipeline
+from vjm_ros.core import layout, pipeline
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
@@ -95,35 +95,35 @@ def _vec(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def _unpack(buffers: K.Data, n: int) -> tuple[DynamicsTerms, ClosureTerms]:
-    """The kernel's output buffers (the first seven fields of a :class:`~vjm_ros.core.kernels.Data`)
+def _unpack(buffers: layout.Data, n: int) -> tuple[DynamicsTerms, ClosureTerms]:
+    """The kernel's output buffers (the first seven fields of a :class:`~vjm_ros.core.layout.Data`)
     as value objects (views of the buffers, nothing copied)."""
     kin, mm, bias, cm, crow, jac, points = buffers[:7]
     rotation = np.empty((n + 1, 2, 2))
-    rotation[:, 0, 0] = kin[:, K.K_COS]
-    rotation[:, 1, 0] = kin[:, K.K_SIN]
-    rotation[:, 0, 1] = -kin[:, K.K_SIN]
-    rotation[:, 1, 1] = kin[:, K.K_COS]
+    rotation[:, 0, 0] = kin[:, layout.K_COS]
+    rotation[:, 1, 0] = kin[:, layout.K_SIN]
+    rotation[:, 0, 1] = -kin[:, layout.K_SIN]
+    rotation[:, 1, 1] = kin[:, layout.K_COS]
     n_pred = np.empty((n, 2))
-    n_pred[:, 0] = -kin[:n, K.K_PSIN]
-    n_pred[:, 1] = kin[:n, K.K_PCOS]
+    n_pred[:, 0] = -kin[:n, layout.K_PSIN]
+    n_pred[:, 1] = kin[:n, layout.K_PCOS]
     kinematics = Kinematics(
-        theta=kin[:, K.K_THETA],
-        origin=kin[:, K.K_OX : K.K_OY + 1],
-        omega=kin[:, K.K_OMEGA],
-        v_origin=kin[:, K.K_VX : K.K_VY + 1],
-        a_origin=kin[:, K.K_AX : K.K_AY + 1],
+        theta=kin[:, layout.K_THETA],
+        origin=kin[:, layout.K_OX : layout.K_OY + 1],
+        omega=kin[:, layout.K_OMEGA],
+        v_origin=kin[:, layout.K_VX : layout.K_VY + 1],
+        a_origin=kin[:, layout.K_AX : layout.K_AY + 1],
         n_pred=n_pred,
         rotation=rotation,
-        slide=kin[:n, K.K_SLIDE],
+        slide=kin[:n, layout.K_SLIDE],
     )
-    dyn = DynamicsTerms(kinematics, mm, bias, cm[:, K.C_X : K.C_Y + 1], cm[:, K.C_VX : K.C_VY + 1])
+    dyn = DynamicsTerms(kinematics, mm, bias, cm[:, layout.C_X : layout.C_Y + 1], cm[:, layout.C_VX : layout.C_VY + 1])
     closure = ClosureTerms(
-        residual=crow[:, K.R_RES],
-        rate=crow[:, K.R_RATE],
+        residual=crow[:, layout.R_RES],
+        rate=crow[:, layout.R_RATE],
         jacobian=jac,
-        bias=crow[:, K.R_BIAS],
-        row_direction=crow[:, K.R_DX : K.R_DZ + 1],
+        bias=crow[:, layout.R_BIAS],
+        row_direction=crow[:, layout.R_DX : layout.R_DZ + 1],
         points=points,
     )
     return dyn, closure
@@ -174,7 +174,7 @@ class Mechanism:
         n, r = model.n, model.n_rows
         self._layout = closure_layout(model, self._packed.blocks)
         self._data = self.new_data()
-        self._shapes = K.output_shapes(self._packed)
+        self._shapes = layout.output_shapes(self._packed)
         # the compiled copies with the hub solves only where there is a hub layout (they take
         # seconds more to compile)
         hub = self._layout[r, 0] >= 0
@@ -215,25 +215,25 @@ class Mechanism:
         self._packed = self._packed._replace(gains=gains, par=par)
 
     @property
-    def packed(self) -> K.PackedModel:
+    def packed(self) -> layout.PackedModel:
         """The model and closure method as the kernels read them (read-only: the mechanism's
         kernels use these very arrays; assign :attr:`method` to change the method)."""
         return self._packed
 
-    def new_data(self, fill: float | None = None) -> K.Data:
-        """A fresh workspace of the kernels for this mechanism (:func:`vjm_ros.core.kernels.make_data`),
+    def new_data(self, fill: float | None = None) -> layout.Data:
+        """A fresh workspace of the kernels for this mechanism (:func:`vjm_ros.core.layout.make_data`),
         e.g. for another thread; ``fill``: the value its output buffers start with (uninitialized
         when None)."""
-        data = K.make_data(self._packed, self._layout)
+        data = layout.make_data(self._packed, self._layout)
         if fill is not None:
             for buffer in data[:7]:
                 buffer.fill(fill)
         return data
 
-    def _fresh_outputs(self, fill: float | None = None) -> K.Data:
+    def _fresh_outputs(self, fill: float | None = None) -> layout.Data:
         """The instance's workspace with fresh output buffers (the scratch arrays shared)."""
         make = np.empty if fill is None else np.zeros
-        return K.Data(*(make(shape) for shape in self._shapes), *self._data[7:])
+        return layout.Data(*(make(shape) for shape in self._shapes), *self._data[7:])
 
     def _check(self, status: int) -> None:
         """Settle the tiered kernel (:meth:`_settle_step`); a singular matrix as ``LinAlgError``."""
@@ -368,10 +368,10 @@ class Mechanism:
         qdd = np.empty(self.n)
         self._check(K.evaluate(self._packed, data, _vec(q), _vec(qd), _vec(tau), qdd,
                                self._step))
-        energy = data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1].copy()
-        data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0
+        energy = data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1].copy()
+        data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1] = 0.0
         dyn, closure = _unpack(data, self.n)
-        return Evaluation(qdd, dyn, closure, data.crow[:, K.R_FORCE], energy)
+        return Evaluation(qdd, dyn, closure, data.crow[:, layout.R_FORCE], energy)
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
         """Kinetic, potential, constraint and total energy, J.
@@ -439,7 +439,7 @@ class Mechanism:
         """
         q = _vec(q)
         self._check(K.residual(self._packed, self._data, q, self._step))
-        res = self._data.crow[:, K.R_RES].copy()
+        res = self._data.crow[:, layout.R_RES].copy()
         return self.closures.errors(ClosureTerms(res, res, res, res, res, res))
 
     def kinematics(self, q: np.ndarray, qd: np.ndarray | None = None) -> Kinematics:
@@ -490,7 +490,7 @@ class Mechanism:
             K.residual(self._packed, data, q, self._step)
         if type(self._step) is tiers.Tiered:
             self._settle_step()
-        data.kin[self.n, K.K_PCOS : K.K_SLIDE + 1] = 0.0  # the energies' slots
+        data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1] = 0.0  # the energies' slots
         return _unpack(data, self.n)
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
@@ -574,8 +574,8 @@ class Mechanism:
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
                 int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
-                bool(project), float(limit), K.as_arguments(self._packed),
-                K.as_arguments(self._data), lengths, plink, plocal,
+                bool(project), float(limit), layout.as_arguments(self._packed),
+                layout.as_arguments(self._data), lengths, plink, plocal,
                 part_out, self._tick_state,
             )
             reused = max(ran - 1, 0)  # each tick after a call's first starts from the sample before

@@ -1,7 +1,7 @@
 """The model and the closure method as the flat arrays the compiled kernels read.
 
-Layouts in :mod:`vjm_ros.core.kernels`; :func:`pack_model` builds them, as one
-:class:`~vjm_ros.core.kernels.PackedModel`, once per mechanism (its closure method's arrays again
+Layouts in :mod:`vjm_ros.core.layout`; :func:`pack_model` builds them, as one
+:class:`~vjm_ros.core.layout.PackedModel`, once per mechanism (its closure method's arrays again
 when the method is replaced).
 """
 
@@ -10,14 +10,14 @@ from __future__ import annotations
 import numpy as np
 
 from vjm_ros.core import hub_linalg as H
-from vjm_ros.core import kernels as K
+from vjm_ros.core import layout
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.model import ANGLE, HINGE, SLIDER, Model
 
-_KIND_CODE = {HINGE: K.HINGE, SLIDER: K.SLIDER, ANGLE: K.ANGLE}
+_KIND_CODE = {HINGE: layout.HINGE, SLIDER: layout.SLIDER, ANGLE: layout.ANGLE}
 
 
-def pack_model(model: Model, method: PenaltyClosure | ExactClosure) -> K.PackedModel:
+def pack_model(model: Model, method: PenaltyClosure | ExactClosure) -> layout.PackedModel:
     """The model and its closure method as the kernels read them.
 
     Parameters
@@ -29,9 +29,9 @@ def pack_model(model: Model, method: PenaltyClosure | ExactClosure) -> K.PackedM
     -------
     PackedModel
         :func:`pack_links`, :func:`pack_method` and :func:`chain_blocks` (layouts in
-        :mod:`vjm_ros.core.kernels`).
+        :mod:`vjm_ros.core.layout`).
     """
-    return K.PackedModel(*pack_links(model), *pack_method(method, model), chain_blocks(model))
+    return layout.PackedModel(*pack_links(model), *pack_method(method, model), chain_blocks(model))
 
 
 def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -55,20 +55,20 @@ def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     """
     n = model.n
     lint = np.zeros((n, 3), dtype=np.int64)
-    lflt = np.zeros((n, K.N_LFLT))
+    lflt = np.zeros((n, layout.N_LFLT))
     for chain in model.chains:
         for i in chain.links:
-            lint[i, K.L_START] = chain.links[0]
-    lint[:, K.L_REV] = model.is_revolute
-    lint[:, K.L_FIRST] = model.first_of_chain
-    lflt[:, K.F_BASE_ANGLE] = model.base_angle
-    lflt[:, K.F_BASE_X : K.F_BASE_Y + 1] = model.base_origin
-    lflt[:, K.F_PRED_LEN] = model.pred_length
-    lflt[:, K.F_LOCK_ANGLE] = model.locked_angle
-    lflt[:, K.F_LOCK_SLIDE] = model.locked_slide
-    lflt[:, K.F_MASS] = model.mass
-    lflt[:, K.F_INERTIA] = model.inertia
-    lflt[:, K.F_COM_P : K.F_COM_Q + 1] = model.com
+            lint[i, layout.L_START] = chain.links[0]
+    lint[:, layout.L_REV] = model.is_revolute
+    lint[:, layout.L_FIRST] = model.first_of_chain
+    lflt[:, layout.F_BASE_ANGLE] = model.base_angle
+    lflt[:, layout.F_BASE_X : layout.F_BASE_Y + 1] = model.base_origin
+    lflt[:, layout.F_PRED_LEN] = model.pred_length
+    lflt[:, layout.F_LOCK_ANGLE] = model.locked_angle
+    lflt[:, layout.F_LOCK_SLIDE] = model.locked_slide
+    lflt[:, layout.F_MASS] = model.mass
+    lflt[:, layout.F_INERTIA] = model.inertia
+    lflt[:, layout.F_COM_P : layout.F_COM_Q + 1] = model.com
     k = len(model.closures)
     cint = np.zeros((k, 4), dtype=np.int64)
     cflt = np.zeros((k, 7))
@@ -103,17 +103,17 @@ def pack_method(
     """
     r = model.n_rows
     gains = np.zeros((r, 2))
-    par = np.zeros(K.N_PAR)
+    par = np.zeros(layout.N_PAR)
     if isinstance(method, PenaltyClosure):
-        par[K.P_METHOD] = K.PENALTY
+        par[layout.P_METHOD] = layout.PENALTY
         gains[:, 0] = np.broadcast_to(np.asarray(method.kp, dtype=float), (r,))
         gains[:, 1] = np.broadcast_to(np.asarray(method.kv, dtype=float), (r,))
     else:
-        par[K.P_METHOD] = K.EXACT
-        par[K.P_ALPHA] = method.alpha
-        par[K.P_BETA] = method.beta
-        par[K.P_RCOND] = method.rcond
-    par[K.P_GX : K.P_GY + 1] = np.asarray(model.gravity, dtype=float).reshape(2)
+        par[layout.P_METHOD] = layout.EXACT
+        par[layout.P_ALPHA] = method.alpha
+        par[layout.P_BETA] = method.beta
+        par[layout.P_RCOND] = method.rcond
+    par[layout.P_GX : layout.P_GY + 1] = np.asarray(model.gravity, dtype=float).reshape(2)
     return gains, par
 
 

@@ -36,6 +36,8 @@ import math
 import numpy as np
 
 from vjm_ros.core import kernels as K
+from vjm_ros.core import layout
+from vjm_ros.core.terms import point_motion
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
 
@@ -82,10 +84,10 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     row : int
     q, qd, tau : ndarray, shape (n,)
     model : tuple
-        A :class:`vjm_ros.core.kernels.PackedModel`'s fields as a plain tuple
+        A :class:`vjm_ros.core.layout.PackedModel`'s fields as a plain tuple
         (:func:`vjm_ros.core.kernels.as_arguments`).
     data : tuple
-        The kernel's workspace (:func:`vjm_ros.core.kernels.make_data`), likewise.
+        The kernel's workspace (:func:`vjm_ros.core.layout.make_data`), likewise.
     lengths : ndarray, shape (n,)
         Link lengths, m.
     plink : ndarray of int64, shape (p,)
@@ -118,14 +120,14 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     for j in range(n):
         o_q[row, j] = q[j]
         o_qd[row, j] = qd[j]
-        o_theta[row, j] = kin[j, K.K_THETA]
+        o_theta[row, j] = kin[j, layout.K_THETA]
         power += tau[j] * qd[j]
-        o_seg[row, j, 0, 0] = kin[j, K.K_OX]
-        o_seg[row, j, 0, 1] = kin[j, K.K_OY]
-        o_seg[row, j, 1, 0] = kin[j, K.K_OX] + lengths[j] * kin[j, K.K_COS]
-        o_seg[row, j, 1, 1] = kin[j, K.K_OY] + lengths[j] * kin[j, K.K_SIN]
+        o_seg[row, j, 0, 0] = kin[j, layout.K_OX]
+        o_seg[row, j, 0, 1] = kin[j, layout.K_OY]
+        o_seg[row, j, 1, 0] = kin[j, layout.K_OX] + lengths[j] * kin[j, layout.K_COS]
+        o_seg[row, j, 1, 1] = kin[j, layout.K_OY] + lengths[j] * kin[j, layout.K_SIN]
     for p in range(plink.shape[0]):
-        px, py, _, _, _, _ = K.point_motion(kin, plink[p], plocal[p, 0], plocal[p, 1])
+        px, py, _, _, _, _ = point_motion(kin, plink[p], plocal[p, 0], plocal[p, 1])
         o_points[row, p, 0] = px
         o_points[row, p, 1] = py
     k = cint.shape[0]
@@ -137,25 +139,25 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
         sq = 0.0
         fx = fy = fz = 0.0
         for i in range(first, last):
-            res = crow[i, K.R_RES]
+            res = crow[i, layout.R_RES]
             sq += res * res  # x * x, not x ** 2: plain Python's pow may differ by an ulp
-            f = crow[i, K.R_FORCE]
-            fx += crow[i, K.R_DX] * f
-            fy += crow[i, K.R_DY] * f
-            fz += crow[i, K.R_DZ] * f
+            f = crow[i, layout.R_FORCE]
+            fx += crow[i, layout.R_DX] * f
+            fy += crow[i, layout.R_DY] * f
+            fz += crow[i, layout.R_DZ] * f
         o_error[row, c] = math.sqrt(sq)
         o_force[row, c, 0] = fx
         o_force[row, c, 1] = fy
         o_force[row, c, 2] = fz
         o_cpoints[row, c, 0] = cpts[c, 0]
         o_cpoints[row, c, 1] = cpts[c, 1]
-    if par[K.P_METHOD] == K.PENALTY:
+    if par[layout.P_METHOD] == layout.PENALTY:
         for i in range(r):
-            rate = crow[i, K.R_RATE]
+            rate = crow[i, layout.R_RATE]
             dissipation += gains[i, 1] * (rate * rate)
-    kinetic = kin[n, K.K_PCOS]
-    potential = kin[n, K.K_PSIN]
-    spring = kin[n, K.K_SLIDE]
+    kinetic = kin[n, layout.K_PCOS]
+    potential = kin[n, layout.K_PSIN]
+    spring = kin[n, layout.K_SLIDE]
     o_energy[row, 0] = kinetic
     o_energy[row, 1] = potential
     o_energy[row, 2] = spring
