@@ -183,6 +183,20 @@ class _Reducer:
 
     def chains(self) -> None:
         """Ground-rooted paths covering every link (depth-first search, tree joints first)."""
+        reached, frontier = {WORLD}, [WORLD]
+        while frontier:
+            k = frontier.pop()
+            for j in self.edges:
+                a, b = self.group_of[j.parent], self.group_of[j.child]
+                for src, dst in ((a, b), (b, a)):
+                    if src == k and dst not in reached:
+                        reached.add(dst)
+                        frontier.append(dst)
+        for k in self.links:
+            if k not in reached:
+                raise self.fail(self.g.bodies[k].element or f"link '{k}'",
+                                "a link joined to the world through joints or constraints (a "
+                                "floating base has no planar chain)", f"link '{k}' floating")
         moves: dict[str, list] = {k: [] for k in [WORLD, *self.links]}
         for order, j in enumerate(self.edges):
             a, b = self.group_of[j.parent], self.group_of[j.child]
@@ -196,6 +210,8 @@ class _Reducer:
         self.steps = 0
         self.best: set[str] = set()
         found = self._search([], set(), None)
+        if found is None and self.steps <= SEARCH_BUDGET:
+            self.sign_refusal(moves)
         if found is None:
             missing = [k for k in self.links if k not in self.best]
             name = missing[0] if missing else self.links[0]
@@ -207,6 +223,32 @@ class _Reducer:
                             "(close the branch with a loop joint, or weld it to its parent)",
                             f"link '{name}' {why}")
         self.chain_list = found
+
+    def sign_refusal(self, moves: dict) -> None:
+        """Refuse naming the joint whose axis sign is what leaves no chains, if it is one."""
+        signed = self.moves
+        self.moves = {k: [] for k in moves}
+        for order, j in enumerate(self.edges):
+            if j.role == CONSTRAINT or j.kind not in (REVOLUTE, PRISMATIC):
+                continue
+            a, b = self.group_of[j.parent], self.group_of[j.child]
+            self.moves[a].append(((0, order), b, j, True))
+            self.moves[b].append(((1, order), a, j, False))
+        for k in self.moves:
+            self.moves[k].sort(key=lambda m: m[0])
+        self.steps, best = 0, self.best
+        found = self._search([], set(), None)
+        self.moves, self.best = signed, best
+        if found is None:
+            return
+        for ch in found:
+            for j, forward, _ in ch:
+                if not self.may_walk(j, forward):
+                    raise self.fail(
+                        j.element, f"a revolute axis along the plane normal {_vec(self.normal)} "
+                        "like the other joints' (or a loop through the joint, which then closes "
+                        "it): the scene's coordinate would be minus the file's position",
+                        f"the opposite axis {_vec(j.axis)}")
 
     def _search(self, chains: list, covered: set, end: str | None):
         self.steps += 1

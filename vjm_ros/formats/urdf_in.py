@@ -115,7 +115,8 @@ class _UrdfReader:
             rest = [j for j in pending if j.parent not in frame]
             for j in pending:
                 if j.parent in frame:
-                    frame[j.child] = frame[j.parent] @ Pose(j.origin[:3, :3], j.origin[:3, 3])
+                    origin = np.eye(4) if j.origin is None else np.asarray(j.origin)
+                    frame[j.child] = frame[j.parent] @ Pose(origin[:3, :3], origin[:3, 3])
             if len(rest) == len(pending):
                 raise self.fail(f"joint '{rest[0].name}'", "a joint reached from the root link",
                                 rest[0].parent)
