@@ -10,12 +10,10 @@ of the ticks' constant-acceleration steps, each method's own known map (:data:`P
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
+from vjm_ros.app import cli
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.scene.loader import parse_scene
 from vjm_ros.sim.settings import SimulationSettings
@@ -177,7 +175,7 @@ def test_bad_actuator_keys_are_refused_naming_the_key(entry, key, expected):
     assert expected in str(err.value) and str(err.value).startswith("rod.yaml: ")
 
 
-def test_a_delay_that_is_not_whole_ticks_at_the_run_rate_is_refused(tmp_path):
+def test_a_delay_that_is_not_whole_ticks_at_the_run_rate_is_refused(tmp_path, capsys):
     """Whole ticks at the scene's rate, not at the one asked for: the simulator refuses it
     naming the file and key, and ``vjm run`` exits 2."""
     path = tmp_path / "rod.yaml"
@@ -187,11 +185,8 @@ def test_a_delay_that_is_not_whole_ticks_at_the_run_rate_is_refused(tmp_path):
                        r"a whole number of ticks of 0\.004 s \(rate 250 Hz\), found 0\.003 s"):
         Simulator(scene.model, SimulationSettings(rate=250.0), scene.gains, scene.plant)
     Simulator(scene.model, SimulationSettings(rate=2000.0), scene.gains, scene.plant)
-    done = subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", "run", str(path),
-                           "--rate", "250", "--duration", "0.01"],
-                          capture_output=True, text=True, timeout=120)  # timeout: hang guard
-    assert done.returncode == 2
-    assert "actuators[0].delay" in done.stderr
+    assert cli.main(["run", str(path), "--rate", "250", "--duration", "0.01"]) == 2
+    assert "actuators[0].delay" in capsys.readouterr().err
 
 
 def test_the_csv_reports_the_applied_effort(tmp_path):
@@ -200,9 +195,7 @@ def test_the_csv_reports_the_applied_effort(tmp_path):
     path = tmp_path / "rod.yaml"
     path.write_text(rod("{joint: pivot, limit: 20.0, effort: 2.0, gear: 3.0, "
                         "time_constant: 0.05, delay: 0.003}"))
-    subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", "run", str(path), "--duration",
-                    "0.2", "--out", str(tmp_path / "out")], check=True, capture_output=True,
-                   timeout=120)  # timeout: hang guard
+    assert cli.main(["run", str(path), "--duration", "0.2", "--out", str(tmp_path / "out")]) == 0
     table = np.genfromtxt(tmp_path / "out" / "trajectory.csv", delimiter=",", names=True)
     t, effort = table["t"], table["effortpivot"]
     _, w1, _ = step_integrals(t, 6.0, 0.05, 0.003)

@@ -237,16 +237,22 @@ class BlockEncoder:
         Markers on samples whose count is a multiple of it (0: none).
     force_scale : float
         Length of the constraint-force arrows, m/N.
+    measured : bool
+        The blocks carry sensor measurements: ``/joint_states`` from them, followed by the
+        exact state on ``/<node>/ground_truth/joint_states``.
     """
 
     def __init__(self, model, channels: dict[str, int], topics: messages.Topics,
-                 marker_every: int, force_scale: float):
+                 marker_every: int, force_scale: float, measured: bool = False):
         k = len(model.closures)
         self.force_scale = float(force_scale)
         self.marker_every = int(marker_every)
-        self.kinds = [
-            _Kind(channels[topics.joint_states],
-                  cdr.joint_state_layout(model.joint_names, messages.FRAME_ID)),
+        self.measured = bool(measured)
+        joints = cdr.joint_state_layout(model.joint_names, messages.FRAME_ID)
+        self.kinds = [_Kind(channels[topics.joint_states], joints)]
+        if self.measured:
+            self.kinds.append(_Kind(channels[topics.ground_truth_joint_states], joints))
+        self.kinds += [
             _Kind(channels[topics.constraint_forces], cdr.multi_array_layout(
                 messages.labelled_layout(model.closure_names, len(messages.FORCE_COMPONENTS)),
                 3 * k)),
@@ -270,8 +276,11 @@ class BlockEncoder:
         force = block.force[:rows]
         effort = (block.effort[:rows] if block.effort.ndim == 2  # one row per tick
                   else np.broadcast_to(block.effort, block.q[:rows].shape))
-        values = [[block.q[:rows], block.qd[:rows], effort],
-                  [force.reshape(rows, -1)] if force.shape[1] else []]
+        values = [[block.q[:rows], block.qd[:rows], effort]]
+        if self.measured:
+            m = block.measured[:rows]
+            values.insert(0, [m[:, 0], m[:, 1], m[:, 2]])
+        values.append([force.reshape(rows, -1)] if force.shape[1] else [])
         values += [[force[:, j, :2], force[:, j, 2:]] for j in range(force.shape[1])]
         return values + [[block.energy[:rows]], []]
 

@@ -162,6 +162,9 @@ class McapRecorder(Recorder):
         self._closed = False
         self._joint_names = list(model.joint_names)
         self._closure_names = list(model.closure_names)
+        self.measured = bool(settings.get("sensors"))
+        """A scene with sensors: ``/joint_states`` holds the measured state (as the node
+        publishes it) and ``/<node>/ground_truth/joint_states`` the exact one."""
         self._file = open(self.path, "wb")  # closed in close()
         try:
             self._writer = mcap_block.BlockWriter(
@@ -198,12 +201,13 @@ class McapRecorder(Recorder):
         )
         self._enc_wrench = cdr.wrench_stamped_encoder(messages.FRAME_ID)
         self._ch_joints = self._channels[t.joint_states]
+        self._ch_truth = self._channels.get(t.ground_truth_joint_states)
         self._ch_forces = self._channels[t.constraint_forces]
         self._ch_energy = self._channels[t.energy]
         self._ch_clock = self._channels[t.clock]
         self._ch_wrench = [self._channels[t.wrench(name)] for name in self._closure_names]
         self._block_encoder = mcap_block.BlockEncoder(
-            self.model, self._channels, t, self.marker_every, self.force_scale)
+            self.model, self._channels, t, self.marker_every, self.force_scale, self.measured)
 
     @staticmethod
     def _library() -> str:
@@ -214,8 +218,10 @@ class McapRecorder(Recorder):
     def _register_channels(self) -> dict[str, int]:
         """One schema per type and one channel per topic, all in the first chunk."""
         t = self.topics
-        plan = [
-            (t.joint_states, messages.JOINT_STATE),
+        plan = [(t.joint_states, messages.JOINT_STATE)]
+        if self.measured:
+            plan.append((t.ground_truth_joint_states, messages.JOINT_STATE))
+        plan += [
             (t.constraint_forces, messages.FLOAT64_MULTI_ARRAY),
             (t.energy, messages.FLOAT64_MULTI_ARRAY),
             (t.clock, messages.CLOCK),
@@ -262,7 +268,12 @@ class McapRecorder(Recorder):
         self._check_open()
         ns = self.timebase.to_ns(sample.t)
         put = self._put
-        put(self._ch_joints, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
+        if self.measured:
+            m = sample.measured
+            put(self._ch_joints, self._enc_joints(ns, m[0], m[1], m[2]), ns)
+            put(self._ch_truth, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
+        else:
+            put(self._ch_joints, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
         forces = sample.closure_force.tolist()
         put(self._ch_forces, self._enc_forces([v for f in forces for v in f]), ns)
         for channel, (fx, fy, mz) in zip(self._ch_wrench, forces, strict=True):

@@ -10,6 +10,7 @@ Topics (docs/design.md section 5), with ``<node>`` the node name (default ``vjm_
 topic                                       type                                rate
 ==========================================  ==================================  =================
 ``/joint_states``                           ``sensor_msgs/msg/JointState``      every tick
+``/<node>/ground_truth/joint_states``        ``sensor_msgs/msg/JointState``      every tick (*)
 ``/<node>/constraint_forces``               ``std_msgs/msg/Float64MultiArray``  every tick
 ``/<node>/closures/<closure>/wrench``       ``geometry_msgs/msg/WrenchStamped`` every tick
 ``/<node>/energy``                          ``std_msgs/msg/Float64MultiArray``  every tick
@@ -17,6 +18,9 @@ topic                                       type                                
 ``/<node>/markers``                         ``visualization_msgs/msg/MarkerArray`` decimated
 ``/<node>/events``                          ``std_msgs/msg/String``             on events
 ==========================================  ==================================  =================
+
+(*) Only for a scene with sensors: ``/joint_states`` then carries the measured state and this
+topic the exact one.
 
 Times are integer nanoseconds; every header uses the frame ``world`` (x right, y up, z out of the
 plane, metres).
@@ -97,6 +101,7 @@ class Topics:
     energy = _private_topic("energy")
     markers = _private_topic("markers")
     events = _private_topic("events")
+    ground_truth_joint_states = _private_topic("ground_truth/joint_states")
 
     def wrench(self, closure: str) -> str:
         """``<namespace>/<node>/closures/<closure>/wrench``."""

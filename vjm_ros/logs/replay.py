@@ -318,12 +318,17 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
     if not info.scene_text:
         raise ValueError(f"{mcap_path}: no {SCENE_ATTACHMENT} attachment; cannot rebuild the model")
     model = parse_scene(info.scene_text, source=f"{mcap_path}:{SCENE_ATTACHMENT}").model
-    joint_topic = Topics(namespace=str(info.settings.get("namespace", ""))).joint_states
+    topics = Topics(str(info.settings.get("node", "vjm_sim_node")),
+                    str(info.settings.get("namespace", "")))
+    # the exact state: with sensors, /joint_states holds what they measured
+    joint_topic = (topics.ground_truth_joint_states if info.settings.get("sensors")
+                   else topics.joint_states)
     poser = _Poser(model)
     no_force = np.full((len(model.closures), 3), np.nan)
     no_energy = np.full(len(ENERGY_LABELS), np.nan)
-    settings = {
-        k: v for k, v in info.settings.items() if k not in ("scene", "node", "namespace", "time")
+    settings = {  # the replayed samples are the exact states: no measurements
+        k: v for k, v in info.settings.items()
+        if k not in ("scene", "node", "namespace", "time", "sensors")
     }
     settings["replayed_from"] = str(mcap_path)
     counts: dict[str, int] = {}

@@ -20,6 +20,9 @@ entity                         archetype      content
 ``series/constraint_forces``   Scalars        ``<closure>.x``, ``.y`` (N) or ``.z`` (N m)
 ``series/energy``              Scalars        kinetic, potential, constraint, total, J
 ``series/closure_error``       Scalars        ``|C|`` per closure, m or rad
+``series/measured/position``   Scalars        with sensors: what they measure, rad or m (the
+``series/measured/velocity``                  ``series/joints/*`` stay exact), rad/s or m/s,
+``series/measured/effort``                    N m or N
 ``events``                     TextLog        resets
 ``run/settings``, ``run/scene`` TextDocument  run settings (JSON), scene YAML (static)
 ============================== ============== ===============================================
@@ -64,6 +67,8 @@ SERIES = {
     "energy": "series/energy",
     "error": "series/closure_error",
 }
+MEASURED = ("series/measured/position", "series/measured/velocity", "series/measured/effort")
+"""Entities of the sensors' measurements (a scene with sensors), position, velocity, effort."""
 _CONNECT_SCHEMES = VIEWER_SCHEMES
 _LINK_COLORS = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75]],
@@ -92,8 +97,9 @@ def force_components(model: Model) -> tuple[np.ndarray, np.ndarray, list[str]]:
     return np.array(rows, dtype=int), np.array(cols, dtype=int), names
 
 
-def default_blueprint(model: Model) -> rrb.Blueprint:
-    """Mechanism view on the left, one plot per series group on the right."""
+def default_blueprint(model: Model, measured: bool = False) -> rrb.Blueprint:
+    """Mechanism view on the left, one plot per series group on the right (and one of the
+    sensors' measurements when ``measured``)."""
     infinite = rrb.VisibleTimeRanges(
         timeline=TIMELINE,
         start=rrb.TimeRangeBoundary.infinite(),
@@ -112,6 +118,8 @@ def default_blueprint(model: Model) -> rrb.Blueprint:
         rrb.TimeSeriesView(name="Energy (J)", origin=f"/{SERIES['energy']}"),
         rrb.TimeSeriesView(name="Closure error (m, rad)", origin=f"/{SERIES['error']}"),
     ]
+    if measured:
+        plots.append(rrb.TimeSeriesView(name="Measured joint states", origin="/series/measured"))
     left = rrb.Vertical(
         mechanism, rrb.TextLogView(name="Events", origin="/events"), row_shares=[5, 1]
     )
@@ -154,6 +162,9 @@ class RerunRecorder(Recorder):
         A fresh UUID when omitted.
     flip_y : bool
         Log the y-flipping transform on ``mechanism`` (see module notes).
+
+    A scene with sensors (``settings["sensors"]``) also logs the measured joint states
+    (:data:`MEASURED`) from the samples' ``measured``.
     """
 
     def __init__(
@@ -185,10 +196,11 @@ class RerunRecorder(Recorder):
         self.timebase = Timebase(tick_of(settings))
         self.samples = 0
         self._closed = False
+        self.measured = bool(settings.get("sensors"))
         self._force_rows, self._force_cols, self._force_names = force_components(model)
         self._is_angle = np.array([c.kind == ANGLE for c in model.closures], dtype=bool)
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id or uuid.uuid4())
-        self._connect(target, default_blueprint(model))
+        self._connect(target, default_blueprint(model, self.measured))
         self._log_static(scene_text or model.source_text)
         self._allocate()
         self._last_send = time.monotonic()
@@ -265,6 +277,9 @@ class RerunRecorder(Recorder):
         }
         for key, labels in series_names.items():
             log(SERIES[key], rr.SeriesLines(names=labels), static=True)
+        if self.measured:
+            for entity in MEASURED:
+                log(entity, rr.SeriesLines(names=model.joint_names), static=True)
 
     def _allocate(self) -> None:
         b, n, k = self.batch, self.model.n, len(self.model.closures)
@@ -274,6 +289,7 @@ class RerunRecorder(Recorder):
         self._force = np.zeros((b, k, 3))
         self._energy = np.zeros((b, 4))
         self._error = np.zeros((b, k))
+        self._measured = np.zeros((b, 3, n)) if self.measured else None
         self._count = 0
         self._geo: list[tuple] = []  # (times, segments, points, closure points, forces)
         self._cyc: list[tuple] = []  # (times, segments)
@@ -291,6 +307,8 @@ class RerunRecorder(Recorder):
         self._force[i] = sample.closure_force
         self._energy[i] = sample.energy
         self._error[i] = sample.closure_error
+        if self.measured:
+            self._measured[i] = sample.measured
         self._count = i + 1
         if self.samples % self.geometry_every == 0:
             self._geo.append((np.array([ns]), sample.segments[None], sample.points[None],
@@ -324,6 +342,8 @@ class RerunRecorder(Recorder):
             self._force[i : i + take] = block.force[part]
             self._energy[i : i + take] = block.energy[part]
             self._error[i : i + take] = block.error[part]
+            if self.measured:
+                self._measured[i : i + take] = block.measured[part]
             self._count = i + take
             self._keep_geometry(block, ns, first, part)
             done += take
@@ -367,6 +387,9 @@ class RerunRecorder(Recorder):
                 send(SERIES["forces"], idx, rr.Scalars.columns(scalars=forces))
                 send(SERIES["error"], idx, rr.Scalars.columns(scalars=self._error[:c].copy()))
             send(SERIES["energy"], idx, rr.Scalars.columns(scalars=self._energy[:c].copy()))
+            if self.measured:
+                for f, entity in enumerate(MEASURED):
+                    send(entity, idx, rr.Scalars.columns(scalars=self._measured[:c, f].copy()))
             self._count = 0
         if self._geo:
             self._send_geometry()

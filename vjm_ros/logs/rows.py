@@ -107,6 +107,10 @@ class LogRows:
             self._first = self._clock()
         block.t[i] = sample.t
         block.effort[i] = sample.effort
+        if sample.measured is not None:  # a scene with sensors
+            if block.measured is None:
+                block.measured = np.zeros((self._capacity,) + sample.measured.shape)
+            block.measured[i] = sample.measured
         for target, attr in self._targets:
             target[i] = getattr(sample, attr)
         block.rows = i + 1

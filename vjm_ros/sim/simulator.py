@@ -631,6 +631,8 @@ class Simulator:
             "h": self.h,
             "kernel": self.mechanism.kernel,
         }
+        if self.sensors is not None:  # the logs keep the measured and the exact joint states
+            out["sensors"] = True
         if isinstance(self.method, PenaltyClosure):
             out["kp"] = self.method.kp.tolist()
             out["kv"] = self.method.kv.tolist()
