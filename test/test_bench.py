@@ -140,8 +140,3 @@ def test_mujoco_model_matches_the_reference():
             assert np.max(np.linalg.norm(sim.link_ends() - ref.ends[200], axis=1)) < 1e-6
             assert np.max(np.linalg.norm(sim.points() - ref.points[200], axis=1)) < 1e-6
             assert sim.closure_errors().max() < 1e-6
-
-
-def test_mujoco_refuses_slider_closures():
-    with pytest.raises(NotImplementedError, match="slider"):
-        compare_mujoco.model_to_mjcf(load_scene("slider_crank").model)

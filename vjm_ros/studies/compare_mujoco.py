@@ -4,24 +4,13 @@ Optional: install with ``pip install .[compare]``. Nothing here imports :mod:`mu
 import time; :func:`import_mujoco` returns ``None`` when it is missing and the bench then leaves
 the MuJoCo rows out (and says so).
 
-The model is translated from a :class:`~vjm_ros.core.model.Model`, so that geometry, masses, inertias
-and gravity are those of the scene:
-
-* one MJCF body per link, nested along its chain, placed at the scene's initial pose (so
-  ``qpos = 0`` is the vjm initial state); a revolute joint is a ``hinge`` about ``z`` at the link
-  origin, a prismatic joint a ``slide`` along ``n(theta_pred)``;
-* the link's mass at its mass centre ``(p, q)``, centroidal inertia ``I`` about ``z``; MuJoCo needs
-  positive principal inertias, so ``(I/2 + eps, I/2 + eps, I + eps)`` with ``eps`` =
-  :attr:`MujocoSettings.inertia_epsilon` (1e-12 kg m^2: a point mass of the thesis scenes stays a
-  point mass to 1e-10 relative);
-* a ``hinge`` closure is an equality ``connect`` between the two bodies (or the world) with the
-  anchor at the closure point; ``solref``/``solimp`` set how soft MuJoCo makes it;
-* each actuator is a ``motor`` on its joint (torque or force between the joint's two links);
-* sites mark every link end, every named point (chain tips) and both sides of every closure, so
-  that the bench reads the same positions as from vjm.
-
-Slider and angle closures have no MuJoCo equality of the same kind and are refused with
-:class:`NotImplementedError`.
+The model is the scene's MJCF export (:func:`vjm_ros.formats.mjcf_out.scene_mjcf`, the one MJCF
+writer: bodies nested per chain at the initial pose, ``qpos`` equal to the scene's joint
+coordinates, hinge closures as ``connect``, slider and angle closures through carriage bodies,
+actuators as ``motor``, sites at link ends, named points and both sides of every closure), run
+from its ``initial`` keyframe, its closures' carriages of negligible mass
+(:func:`~vjm_ros.formats.mjcf_out.stiffen_carriages`), so that geometry, masses, inertias and gravity are those of the
+scene and the bench reads the same positions as from vjm.
 
 MuJoCo 4.0.0 is excluded (:data:`MUJOCO_REQUIREMENT`): its sparse Cholesky factorization merges
 rows with different descendants into one supernode and gives the Newton solver a wrong Hessian
@@ -32,15 +21,21 @@ are not affected, but a requirement cannot tell models apart.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from types import ModuleType
 
 import numpy as np
 
 from vjm_ros.core.errors import DivergenceError
-from vjm_ros.core.mechanism import forward_kinematics
-from vjm_ros.core.model import GROUND, HINGE, REVOLUTE, Model
+from vjm_ros.core.model import Model
+from vjm_ros.formats.mjcf_out import (  # noqa: F401 (the defaults are part of this module's API)
+    DEFAULT_SOLIMP,
+    DEFAULT_SOLREF,
+    INITIAL_KEY,
+    MjcfSettings,
+    scene_mjcf,
+    stiffen_carriages,
+)
 
 MUJOCO_REQUIREMENT = "mujoco>=3.2,!=4.0.0"
 """Requirement string of the ``compare`` extra."""
@@ -56,10 +51,6 @@ KNOWN_BAD_VERSIONS = {
 INTEGRATORS = ("Euler", "implicitfast", "RK4")
 """MuJoCo integrators compared (MJCF spelling)."""
 
-DEFAULT_SOLREF = (0.02, 1.0)
-"""MuJoCo's default ``solref``: time constant 0.02 s, damping ratio 1."""
-DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
-"""MuJoCo's default ``solimp``."""
 
 
 def import_mujoco() -> ModuleType | None:
@@ -118,136 +109,23 @@ class MujocoSettings:
         return 1.0 / (self.rate * self.substeps)
 
 
-def _f(x: float) -> str:
-    return f"{float(x):.17g}"
-
-
-def _vec(*xs: float) -> str:
-    return " ".join(_f(x) for x in xs)
-
-
 def model_to_mjcf(model: Model, settings: MujocoSettings | None = None) -> str:
-    """MJCF text of a scene model.
+    """MJCF text of a scene model at the bench's settings (:func:`scene_mjcf`).
 
     Parameters
     ----------
     model : Model
-        Revolute and prismatic joints, hinge closures only.
     settings : MujocoSettings, optional
 
     Returns
     -------
     str
-
-    Raises
-    ------
-    NotImplementedError
-        For slider or angle closures.
     """
     s = settings or MujocoSettings()
-    for cl in model.closures:
-        if cl.kind != HINGE:
-            raise NotImplementedError(
-                f"closure '{cl.name}' is a {cl.kind}; only hinge closures have a MuJoCo counterpart"
-            )
-    q, _ = model.initial_state()
-    kin = forward_kinematics(model, q)
-    g = model.gravity
-    eps = float(s.inertia_epsilon)
-    lines = [
-        f'<mujoco model="{model.name}">',
-        '  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>',
-        f'  <option timestep="{_f(s.timestep)}" integrator="{s.integrator}" '
-        f'gravity="{_vec(g[0], g[1], 0.0)}">',
-        '    <flag contact="disable" energy="enable"/>',
-        "  </option>",
-        "  <worldbody>",
-    ]
-    lines += [
-        f'    <site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>'
-        for cl in model.closures
-        if cl.target.link == GROUND
-    ]
-    for chain in model.chains:
-        lines += _chain_bodies(model, chain, q, kin.theta, eps)
-    lines.append("  </worldbody>")
-    if model.closures:
-        lines.append("  <equality>")
-        for cl in model.closures:
-            body2 = "world" if cl.target.link == GROUND else model.links[cl.target.link].name
-            lines.append(
-                f'    <connect name="{cl.name}" body1="{model.links[cl.point.link].name}" '
-                f'body2="{body2}" anchor="{_vec(*cl.point.local, 0.0)}" '
-                f'solref="{_vec(*s.solref)}" solimp="{_vec(*s.solimp)}"/>'
-            )
-        lines.append("  </equality>")
-    if model.actuators:
-        lines.append("  <actuator>")
-        for a in model.actuators:
-            jn = model.joints[a.joint].name
-            lines.append(f'    <motor name="act_{jn}" joint="{jn}" gear="1"/>')
-        lines.append("  </actuator>")
-    lines.append("</mujoco>")
-    return "\n".join(lines) + "\n"
-
-
-def _chain_bodies(model: Model, chain, q: np.ndarray, theta: np.ndarray, eps: float) -> list[str]:
-    """MJCF bodies of one chain, nested link after link, at the pose ``q``."""
-    lines = []
-    pred_theta = chain.angle
-    for pos, i in enumerate(chain.links):
-        link, joint = model.links[i], model.joints[i]
-        slide = joint.slide if joint.kind == REVOLUTE else q[i]
-        phi = float(theta[i] - pred_theta)
-        indent = "    " + "  " * pos
-        if pos == 0:
-            th1, a1 = chain.angle, chain.length
-            o = (
-                np.asarray(chain.origin, dtype=float)
-                + a1 * np.array([math.cos(th1), math.sin(th1)])
-                + slide * np.array([-math.sin(th1), math.cos(th1)])
-            )
-            lines.append(
-                f'{indent}<body name="{link.name}" pos="{_vec(o[0], o[1], 0.0)}" '
-                f'euler="{_vec(0.0, 0.0, theta[i])}">'
-            )
-        else:
-            prev = model.links[chain.links[pos - 1]]
-            lines.append(
-                f'{indent}<body name="{link.name}" pos="{_vec(prev.length, slide, 0.0)}" '
-                f'euler="{_vec(0.0, 0.0, phi)}">'
-            )
-        lines += _link_contents(model, i, phi, indent + "  ", eps)
-        pred_theta = float(theta[i])
-    for d in range(len(chain.links) - 1, -1, -1):
-        lines.append("    " + "  " * d + "</body>")
-    return lines
-
-
-def _link_contents(model: Model, i: int, phi: float, inner: str, eps: float) -> list[str]:
-    """Joint, inertial and sites of link ``i`` (relative angle to its predecessor ``phi``)."""
-    link, joint = model.links[i], model.joints[i]
-    lines = []
-    if joint.kind == REVOLUTE:
-        lines.append(f'{inner}<joint name="{joint.name}" type="hinge" axis="0 0 1"/>')
-    else:
-        axis = _vec(math.sin(phi), math.cos(phi), 0.0)
-        lines.append(f'{inner}<joint name="{joint.name}" type="slide" axis="{axis}"/>')
-    inertia = float(link.inertia)
-    lines.append(
-        f'{inner}<inertial pos="{_vec(*link.com, 0.0)}" mass="{_f(max(link.mass, eps))}" '
-        f'diaginertia="{_vec(inertia / 2 + eps, inertia / 2 + eps, inertia + eps)}"/>'
-    )
-    lines.append(f'{inner}<site name="end_{link.name}" pos="{_vec(link.length, 0.0, 0.0)}"/>')
-    for p in model.points:
-        if p.ref.link == i:
-            lines.append(f'{inner}<site name="pt_{p.name}" pos="{_vec(*p.ref.local, 0.0)}"/>')
-    for cl in model.closures:
-        if cl.point.link == i:
-            lines.append(f'{inner}<site name="cl_{cl.name}_a" pos="{_vec(*cl.point.local, 0.0)}"/>')
-        if cl.target.link == i:
-            lines.append(f'{inner}<site name="cl_{cl.name}_b" pos="{_vec(*cl.target.local, 0.0)}"/>')
-    return lines
+    return scene_mjcf(model, MjcfSettings(timestep=s.timestep, integrator=s.integrator,
+                                          solref=tuple(s.solref), solimp=tuple(s.solimp),
+                                          inertia_epsilon=s.inertia_epsilon,
+                                          carriage_mass=s.inertia_epsilon))
 
 
 class MujocoSimulator:
@@ -273,6 +151,7 @@ class MujocoSimulator:
         self.settings = settings or MujocoSettings()
         self.xml = model_to_mjcf(model, self.settings)
         self.m = mj.MjModel.from_xml_string(self.xml)
+        stiffen_carriages(self.m, model)
         self.d = mj.MjData(self.m)
         self.dt = 1.0 / self.settings.rate
         self.substeps = int(self.settings.substeps)
@@ -290,8 +169,8 @@ class MujocoSimulator:
         self._previous_handler = mj.get_mju_user_warning()
         self.warnings: list[str] = []
         mj.set_mju_user_warning(self.warnings.append)
-        q0, qd0 = model.initial_state()
-        self.d.qvel[:] = qd0
+        mj.mj_resetDataKeyframe(self.m, self.d, mj.mj_name2id(self.m, mj.mjtObj.mjOBJ_KEY,
+                                                              INITIAL_KEY))
         mj.mj_forward(self.m, self.d)
 
     def close(self) -> None:

@@ -54,7 +54,7 @@ FULL_SCENES = ("four_bar", "six_bar", "double_slider", "five_bar", "three_chain"
 QUICK_SCENES = ("four_bar", "five_bar")
 """Scenes of ``--quick``: the two with a MuJoCo counterpart."""
 MUJOCO_SCENES = ("four_bar", "five_bar")
-"""Scenes also run in MuJoCo (hinge closures only)."""
+"""Scenes also run in MuJoCo (any scene can be: these two keep the study short)."""
 
 REFERENCE_SETTINGS = {"integrator": "dop853", "rtol": 1e-12, "atol": 1e-14}
 """The reference: exact closure, ``dop853`` at these tolerances."""

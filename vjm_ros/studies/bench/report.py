@@ -297,9 +297,11 @@ def _mujoco_text(meta: dict) -> list[str]:
     mj = meta["mujoco"]
     if mj.get("skipped"):
         return [f"MuJoCo rows skipped: {mj['skipped']}.", ""]
-    out = [f"MuJoCo {mj['version']} rows use the model of `vjm_ros.studies.compare_mujoco` (same geometry, "
-           "masses, inertias plus 1e-12 kg m², gravity; closures as equality `connect` "
-           "constraints) and are timed the same way (`mj_step` calls only).", ""]
+    out = [f"MuJoCo {mj['version']} rows use the model of `vjm_ros.studies.compare_mujoco`, the "
+           "scene's MJCF export (same geometry, masses, inertias plus 1e-12 kg m², gravity; "
+           "hinge closures as equality `connect` constraints, slider closures as a `connect` to "
+           "a carriage of negligible mass on a slide) and are timed the same way (`mj_step` "
+           "calls only).", ""]
     if mj.get("note"):
         out += [f"**MuJoCo version warning**: {mj['note']}.", ""]
     return out
