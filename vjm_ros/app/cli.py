@@ -1,7 +1,7 @@
 """Command line interface ``vjm`` (works without ROS).
 
 Subcommands: ``scenes``, ``run``, ``model``, ``bench``, ``sweep``, ``tune``, ``replay``,
-``recover``. See
+``recover``, ``export``. See
 docs/design.md section 5.
 
 Exit codes of ``vjm run``: 0 success; 2 bad input (scene file, setting, stiffness refused before
@@ -129,10 +129,11 @@ def _parser() -> argparse.ArgumentParser:
     sw.add_argument("rest", nargs=argparse.REMAINDER)
     tu = sub.add_parser("tune", help="penalty gains for an integrator and step", add_help=False)
     tu.add_argument("rest", nargs=argparse.REMAINDER)
-    from vjm_ros.app import import_cli, model_cli
+    from vjm_ros.app import export_cli, import_cli, model_cli
 
     model_cli.add_parser(sub)
     import_cli.add_parser(sub)
+    export_cli.add_parser(sub)
     rp = sub.add_parser("replay", help="rerun recording from an MCAP log")
     rp.add_argument("mcap", type=Path)
     rp.add_argument("-o", "--output", type=Path, help="output .rrd (default: next to the log)")
@@ -183,6 +184,10 @@ def _main(argv: list[str] | None) -> int:
             from vjm_ros.app import import_cli
 
             return import_cli.run(args)
+        if args.command == "export":
+            from vjm_ros.app import export_cli
+
+            return export_cli.run(args)
         if args.command == "replay":
             from vjm_ros.logs.replay import replay
 
