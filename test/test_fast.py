@@ -51,8 +51,8 @@ from vjm_ros.core.compiled import (
     make_mechanism,
 )
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
+from vjm_ros.core.evaluation import Evaluation as FastEvaluation
 from vjm_ros.core.integrators import make_integrator
-from vjm_ros.core.mechanism import Evaluation as FastEvaluation
 from vjm_ros.core.mechanism import Mechanism as FastMechanism
 from vjm_ros.core.model import (
     ANGLE,

@@ -32,101 +32,17 @@ which checks the kernels against it.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from vjm_ros.core import kernels as K
 from vjm_ros.core import layout, pipeline
 from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, PenaltyClosure
+from vjm_ros.core.evaluation import DynamicsTerms, Evaluation, as_vector, unpack
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
 from vjm_ros.core.packing import closure_layout, pack_method, pack_model
 from vjm_ros.jit import tiers
-
-
-@dataclass
-class DynamicsTerms:
-    """Everything the equations of motion need at one state.
-
-    Attributes
-    ----------
-    kin : Kinematics
-    mass_matrix : ndarray, shape (n, n)
-    bias : ndarray, shape (n,)
-        ``b(q, qd)`` such that ``M qdd + b = tau``, N m or N.
-    com : ndarray, shape (n, 2)
-        Mass centres, m.
-    com_velocity : ndarray, shape (n, 2)
-        m/s.
-    """
-
-    kin: Kinematics
-    mass_matrix: np.ndarray
-    bias: np.ndarray
-    com: np.ndarray
-    com_velocity: np.ndarray
-
-
-@dataclass
-class Evaluation:
-    """Every derived quantity at one state and effort.
-
-    Attributes
-    ----------
-    qdd : ndarray, shape (n,)
-    dyn : DynamicsTerms
-    closure : ClosureTerms
-    row_force : ndarray, shape (r,)
-        Closure force per row (penalty force or multiplier), N or N m.
-    energy : ndarray, shape (3,)
-        Kinetic, gravitational and penalty-spring energy (0 for exact closures), J.
-    """
-
-    qdd: np.ndarray
-    dyn: DynamicsTerms
-    closure: ClosureTerms
-    row_force: np.ndarray
-    energy: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _vec(x) -> np.ndarray:
-    """A C-contiguous float64 vector (no copy when ``x`` already is one)."""
-    return np.ascontiguousarray(x, dtype=np.float64)
-
-
-def _unpack(buffers: layout.Data, n: int) -> tuple[DynamicsTerms, ClosureTerms]:
-    """The kernel's output buffers (the first seven fields of a :class:`~vjm_ros.core.layout.Data`)
-    as value objects (views of the buffers, nothing copied)."""
-    kin, mm, bias, cm, crow, jac, points = buffers[:7]
-    rotation = np.empty((n + 1, 2, 2))
-    rotation[:, 0, 0] = kin[:, layout.K_COS]
-    rotation[:, 1, 0] = kin[:, layout.K_SIN]
-    rotation[:, 0, 1] = -kin[:, layout.K_SIN]
-    rotation[:, 1, 1] = kin[:, layout.K_COS]
-    n_pred = np.empty((n, 2))
-    n_pred[:, 0] = -kin[:n, layout.K_PSIN]
-    n_pred[:, 1] = kin[:n, layout.K_PCOS]
-    kinematics = Kinematics(
-        theta=kin[:, layout.K_THETA],
-        origin=kin[:, layout.K_OX : layout.K_OY + 1],
-        omega=kin[:, layout.K_OMEGA],
-        v_origin=kin[:, layout.K_VX : layout.K_VY + 1],
-        a_origin=kin[:, layout.K_AX : layout.K_AY + 1],
-        n_pred=n_pred,
-        rotation=rotation,
-        slide=kin[:n, layout.K_SLIDE],
-    )
-    dyn = DynamicsTerms(kinematics, mm, bias, cm[:, layout.C_X : layout.C_Y + 1], cm[:, layout.C_VX : layout.C_VY + 1])
-    closure = ClosureTerms(
-        residual=crow[:, layout.R_RES],
-        rate=crow[:, layout.R_RATE],
-        jacobian=jac,
-        bias=crow[:, layout.R_BIAS],
-        row_direction=crow[:, layout.R_DX : layout.R_DZ + 1],
-        points=points,
-    )
-    return dyn, closure
 
 
 class Mechanism:
@@ -320,7 +236,7 @@ class Mechanism:
         """
         self.evaluations += 1
         qdd = np.empty(self.n)
-        self._check(K.evaluate(self._packed, self._data, _vec(q), _vec(qd), _vec(tau), qdd,
+        self._check(K.evaluate(self._packed, self._data, as_vector(q), as_vector(qd), as_vector(tau), qdd,
                                self._step))
         return qdd
 
@@ -347,7 +263,7 @@ class Mechanism:
         """
         self.evaluations += 1
         v = np.empty(self.n)
-        self._check(K.implicit_velocity(self._packed, self._data, _vec(q), _vec(qd), _vec(tau),
+        self._check(K.implicit_velocity(self._packed, self._data, as_vector(q), as_vector(qd), as_vector(tau),
                                         float(h), v, self._step))
         return v
 
@@ -366,11 +282,11 @@ class Mechanism:
         self.evaluations += 1
         data = self._fresh_outputs()
         qdd = np.empty(self.n)
-        self._check(K.evaluate(self._packed, data, _vec(q), _vec(qd), _vec(tau), qdd,
+        self._check(K.evaluate(self._packed, data, as_vector(q), as_vector(qd), as_vector(tau), qdd,
                                self._step))
         energy = data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1].copy()
         data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1] = 0.0
-        dyn, closure = _unpack(data, self.n)
+        dyn, closure = unpack(data, self.n)
         return Evaluation(qdd, dyn, closure, data.crow[:, layout.R_FORCE], energy)
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
@@ -409,7 +325,7 @@ class Mechanism:
         if self._rows == 0:
             return q, qd
         q_out, qd_out = np.empty(self.n), np.empty(self.n)
-        self._check(K.project(self._packed, self._data, _vec(q), _vec(qd), int(iterations),
+        self._check(K.project(self._packed, self._data, as_vector(q), as_vector(qd), int(iterations),
                               float(tol), q_out, qd_out, self._step))
         return q_out, qd_out
 
@@ -418,7 +334,7 @@ class Mechanism:
         """The closure Jacobian ``A(q)``, shape (r, n), from one kernel call (``evaluations``
         unchanged: this is not a right-hand side; a singular mass matrix does not matter)."""
         zero = np.zeros(self.n)
-        K.evaluate(self._packed, self._data, _vec(q), zero, zero, np.empty(self.n), self._step)
+        K.evaluate(self._packed, self._data, as_vector(q), zero, zero, np.empty(self.n), self._step)
         if type(self._step) is tiers.Tiered:
             self._settle_step()
         return self._data.jac.copy()
@@ -437,7 +353,7 @@ class Mechanism:
         ndarray, shape (k,)
             m for hinge and slider, rad for angle closures.
         """
-        q = _vec(q)
+        q = as_vector(q)
         self._check(K.residual(self._packed, self._data, q, self._step))
         res = self._data.crow[:, layout.R_RES].copy()
         return self.closures.errors(ClosureTerms(res, res, res, res, res, res))
@@ -481,8 +397,8 @@ class Mechanism:
         closure : ClosureTerms
             Fresh arrays.
         """
-        q = _vec(q)
-        qd = np.zeros(self.n) if qd is None else _vec(qd)
+        q = as_vector(q)
+        qd = np.zeros(self.n) if qd is None else as_vector(qd)
         data = self._fresh_outputs(fill=0.0)
         if jacobian:
             K.evaluate(self._packed, data, q, qd, np.zeros(self.n), np.empty(self.n), self._step)
@@ -491,7 +407,7 @@ class Mechanism:
         if type(self._step) is tiers.Tiered:
             self._settle_step()
         data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1] = 0.0  # the energies' slots
-        return _unpack(data, self.n)
+        return unpack(data, self.n)
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Joint-space inertia matrix ``M(q)``, shape (n, n) (kg, kg m, kg m^2)."""
@@ -524,7 +440,7 @@ class Mechanism:
         stages = 4 if method == K.RK4 else 1
         self.evaluations += stages * int(steps)
         q_out, qd_out = np.empty(self.n), np.empty(self.n)
-        self._check(K.advance(self._packed, self._data, int(method), _vec(q), _vec(qd), _vec(tau),
+        self._check(K.advance(self._packed, self._data, int(method), as_vector(q), as_vector(qd), as_vector(tau),
                               float(h), int(steps), q_out, qd_out, self._step))
         return q_out, qd_out
 
@@ -573,7 +489,7 @@ class Mechanism:
             part = rows - done if ready else min(PLAIN_PART_TICKS, rows - done)
             part_out = out if part == rows else tuple(a[done : done + part] for a in out)
             ran, code = advance(
-                int(method), _vec(q), _vec(qd), _vec(tau), float(h), int(substeps), part,
+                int(method), as_vector(q), as_vector(qd), as_vector(tau), float(h), int(substeps), part,
                 bool(project), float(limit), layout.as_arguments(self._packed),
                 layout.as_arguments(self._data), lengths, plink, plocal,
                 part_out, self._tick_state,
