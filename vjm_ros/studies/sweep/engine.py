@@ -26,11 +26,24 @@ from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.logs.signals import StopSignals
+from vjm_ros.studies.bench.grid import FAILED
+from vjm_ros.studies.sweep.plan import SweepPlan, plan_sweep
 from vjm_ros.studies.sweep.run import MEASURES, case_duration, case_scene, case_settings
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
+from vjm_ros.studies.sweep.table import (
+    RESULTS_CSV,
+    RESULTS_PARQUET,
+    begin_table,
+    cell,
+    inspect_table,
+    write_parquet,
+)
 
-RESULTS_CSV = "results.csv"
-RESULTS_PARQUET = "results.parquet"
+__all__ = ["CLUSTER_TIMEOUT", "RESULTS_CSV", "RESULTS_PARQUET", "Engine", "Sweep", "check_cases",
+           "check_scheduler", "run_sweep", "write_parquet"]
+
+CLUSTER_TIMEOUT = 10.0
+"""Default longest wait, s, for ``--cluster``'s scheduler to accept the connection and answer."""
 
 
 class Engine:
@@ -43,11 +56,15 @@ class Engine:
     workers : int, optional
         Worker processes of the local cluster (one per core by default), one thread each.
     timeout : float
-        Longest wait to reach an existing scheduler, s.
+        Longest wait to reach an existing scheduler and hear it answer as one, s
+        (:data:`CLUSTER_TIMEOUT` by default).
     """
 
     def __init__(self, address: str | None = None, workers: int | None = None,
-                 timeout: float = 10.0) -> None:
+                 timeout: float = CLUSTER_TIMEOUT) -> None:
+        if not (isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0):
+            raise ConfigurationError(
+                f"--cluster-timeout: expected a positive number of seconds, found {timeout!r}")
         self.address = address
         self.workers = workers or os.cpu_count() or 1
         self.timeout = timeout
@@ -58,6 +75,7 @@ class Engine:
         from distributed import Client, LocalCluster
 
         if self.address:
+            check_scheduler(self.address, self.timeout)
             try:
                 self.client = Client(self.address, timeout=f"{self.timeout}s")
             except (OSError, TimeoutError) as exc:
@@ -87,6 +105,67 @@ class Engine:
         return len(self.client.scheduler_info()["workers"])
 
 
+def check_scheduler(address: str, timeout: float = CLUSTER_TIMEOUT) -> None:
+    """Refuse an address that is not a Dask scheduler's, within ``timeout`` s.
+
+    Dask's own client waits for a handshake without a bound: a server that accepts the
+    connection but speaks another protocol (an HTTP server, say) would hang it. Here the
+    connection, the handshake and an ``identity`` request each have ``timeout`` s, and the
+    answer must come from a scheduler.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the address and what was found: a malformed address, nothing listening, no
+        answer in time, or a server that is not a Dask scheduler.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import backends
+
+    where = f"--cluster {address}"
+    try:
+        scheme, loc = parse_address(address)
+        if scheme not in backends:
+            raise ValueError(f"unknown scheme {scheme!r}; known: {', '.join(sorted(backends))}")
+        if scheme in ("tcp", "tls"):
+            parse_host_port(loc)
+            if ":" not in loc.rsplit("]", 1)[-1]:
+                raise ValueError("no port")
+    except (ValueError, TypeError) as exc:
+        raise ConfigurationError(
+            f"{where}: expected a scheduler address such as tcp://host:8786, found a malformed "
+            f"address ({exc})") from None
+
+    async def identity() -> dict:
+        comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+        try:
+            await asyncio.wait_for(comm.write({"op": "identity", "reply": True}), timeout)
+            return await asyncio.wait_for(comm.read(), timeout)
+        finally:
+            comm.abort()
+
+    try:
+        reply = asyncio.run(identity())
+    except (TimeoutError, asyncio.TimeoutError):
+        raise ConfigurationError(
+            f"{where}: expected a Dask scheduler to answer within {timeout:g} s "
+            "(--cluster-timeout), found no answer: is it a Dask scheduler's address?") from None
+    except (OSError, ValueError, EOFError) as exc:
+        raise ConfigurationError(
+            f"{where}: expected a reachable Dask scheduler, found none ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - a peer that speaks another protocol
+        raise ConfigurationError(
+            f"{where}: expected a Dask scheduler, found a server that answers otherwise "
+            f"({type(exc).__name__}: {exc})") from None
+    kind = reply.get("type") if isinstance(reply, dict) else None
+    if kind != "Scheduler":
+        raise ConfigurationError(
+            f"{where}: expected a Dask scheduler, found {kind or 'another kind of server'}")
+
+
 def _warm_up() -> None:
     """Load the compiled kernels in a worker (from numba's on-disk cache after the first time),
     compiled in the worker before its first run where the cache lacks them: runs are timed."""
@@ -99,20 +178,10 @@ def _warm_up() -> None:
     Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains).advance()
 
 
-def check_cases(spec: SweepSpec, cases: Sequence[Case]) -> None:
-    """Refuse, before any run, what would fail in every run: scenes, parameters, settings."""
-    seen = set()
-    for case in cases:
-        sig = (case.scene, json.dumps(case.parameters, sort_keys=True))
-        if sig in seen:
-            continue
-        seen.add(sig)
-        try:
-            scene = case_scene(*sig)
-            case_settings(Case(case.scene, {k: v for k, v in case.settings.items()
-                                            if k in ("integrator", "closure")}), scene)
-        except (ConfigurationError, ValueError) as exc:
-            raise ConfigurationError(f"{spec.source}: {exc}") from None
+def check_cases(spec: SweepSpec, cases: Sequence[Case] | None = None) -> SweepPlan:
+    """Refuse, before any run, what would fail: scenes, parameters, every row's settings
+    (:func:`vjm_ros.studies.sweep.plan.plan_sweep`)."""
+    return plan_sweep(spec)
 
 
 class SweepProgress:
@@ -139,22 +208,149 @@ class SweepProgress:
         print(("\r" if self.tty else "") + line, end=end, file=sys.stderr, flush=True)
 
 
-def _finished_keys(path: Path, columns: list[str]) -> set[str]:
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        if reader.fieldnames != columns:
-            raise ConfigurationError(
-                f"{path}: expected the columns of this spec to resume, found "
-                f"{reader.fieldnames} (use another --out, or no --resume)")
-        return {row["key"] for row in reader}
+class Sweep:
+    """A checked sweep and its table, ready to run; nothing is written before :meth:`run`.
 
+    Parameters
+    ----------
+    spec : SweepSpec
+    out : str or Path
+        Output directory (``results.csv``, ``results.parquet``).
+    resume, overwrite : bool
+        What to do with a table that holds rows (:func:`~vjm_ros.studies.sweep.table.
+        inspect_table`); without either such a table is refused.
 
-def _cell(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, (list, dict)):
-        return json.dumps(value)
-    return str(value) if not isinstance(value, float) else repr(value)
+    Raises
+    ------
+    ConfigurationError
+        A spec row that cannot run (:func:`plan_sweep`), or a table that may not be written.
+    """
+
+    def __init__(self, spec: SweepSpec, out: str | Path, resume: bool = False,
+                 overwrite: bool = False) -> None:
+        self.spec = spec
+        self.out = Path(out)
+        self.plan = plan_sweep(spec)
+        self.columns = spec.columns + list(MEASURES)
+        self.start = inspect_table(self.out, self.columns, {c.key for c in self.plan.cases},
+                                   resume, overwrite)
+        done = self.start.done
+        self.todo = [c for c in self.plan.cases if c.key not in done]
+
+    def run(self, engine: Engine, progress: bool = True,
+            on_row: Callable[[dict], None] | None = None) -> dict:
+        """Run the rows not in the table yet on ``engine``, writing each as it arrives.
+
+        Returns
+        -------
+        dict
+            ``rows`` (in the spec), ``run`` (written this time), ``skipped`` (finished
+            before), ``left`` (not run: after an interrupt), ``retried`` (``error`` rows run
+            again), ``dropped`` (rows the spec no longer has), ``same_as_another`` (rows that
+            repeat another row's computation, filled from it), ``failed`` (rows written this
+            time whose status is not ``ok``), ``errors`` (of those, ``error`` rows),
+            ``statuses`` (rows of the table per status), ``wall_time`` (s), ``csv``,
+            ``parquet``, ``interrupted``.
+        """
+        from distributed import as_completed
+
+        plan, columns, table = self.plan, self.columns, self.start.path
+        begin_table(self.start, columns)
+        copies: dict[str, list[Case]] = {}
+        for case in self.todo:
+            if case.key in plan.same_as:
+                copies.setdefault(plan.same_as[case.key][0], []).append(case)
+        runs = [c for c in self.todo if c.key not in plan.same_as]
+        client = engine.client
+        references = self._references(runs, client) if self.spec.reference else {}
+        batches = _batches(runs, engine.n_workers)
+        futures = [
+            client.submit(_run_batch, batch, plan.scenes[batch[0].scene],
+                          references.get(_ref_key(batch[0])),
+                          key=f"cases-{batch[0].key}-{len(batch)}-{os.getpid()}", pure=False)
+            for batch in batches
+        ]
+        bar = SweepProgress(len(self.todo), progress)
+        statuses: dict[str, int] = {}
+        for row in self.start.kept:
+            statuses[row["status"]] = statuses.get(row["status"], 0) + 1
+        written = {"n": 0, "failed": 0, "errors": 0}
+        started = time.perf_counter()
+        interrupted = False
+
+        def put(writer, row: dict) -> None:
+            writer.writerow({k: cell(row.get(k)) for k in columns})
+            status = str(row.get("status"))
+            statuses[status] = statuses.get(status, 0) + 1
+            written["n"] += 1
+            written["failed"] += status != "ok"
+            written["errors"] += status == FAILED
+            if on_row is not None:
+                on_row(row)
+
+        def put_copies(writer, row: dict) -> None:
+            for case in copies.pop(row["key"], []):
+                why = plan.same_as[case.key][1]
+                note = f"same run as row {row['key']} ({why})"
+                if row.get("message"):
+                    note += f"; {row['message']}"
+                put(writer, {**row, **case.as_row(), "message": note})
+
+        # SIGINT/SIGTERM only set a flag (logs.signals): nothing inside Dask is interrupted, and
+        # the loop stops at the next finished batch, keeping every row written.
+        with StopSignals() as stop, table.open("a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+            for row in self.start.kept:  # rows that repeat a finished row, not written yet
+                put_copies(writer, row)
+            try:
+                for fut in as_completed(futures):
+                    if stop.requested:
+                        break
+                    try:
+                        rows = fut.result()
+                    except Exception as exc:  # a worker died or a run raised: rows with why
+                        batch = batches[futures.index(fut)]
+                        rows = [{**case.as_row(), **dict.fromkeys(MEASURES), "status": FAILED,
+                                 "message": f"{type(exc).__name__}: {exc}"} for case in batch]
+                    for row in rows:
+                        put(writer, row)
+                        put_copies(writer, row)
+                    f.flush()
+                    bar.update(written["n"], written["failed"])
+            except KeyboardInterrupt:  # a signal handler other than ours (not the main thread)
+                interrupted = True
+            if stop.requested:
+                interrupted = True
+            if interrupted:
+                client.cancel(futures)
+            bar.update(written["n"], written["failed"], final=True)
+        parquet = write_parquet(table, self.out / RESULTS_PARQUET)
+        return {
+            "rows": len(plan.cases), "run": written["n"], "skipped": len(self.start.kept),
+            "left": len(self.todo) - written["n"], "retried": self.start.retried,
+            "dropped": self.start.dropped, "same_as_another": len(plan.same_as),
+            "failed": written["failed"], "errors": written["errors"],
+            "statuses": dict(sorted(statuses.items())),
+            "wall_time": time.perf_counter() - started, "csv": str(table),
+            "parquet": str(parquet), "interrupted": interrupted,
+        }
+
+    def _references(self, cases: Sequence[Case], client) -> dict:
+        """One reference future per scene and parameter set, at a rate every case's rate
+        divides."""
+        from vjm_ros.studies.sweep.run import reference_for
+
+        groups: dict[tuple, list[Case]] = {}
+        for c in cases:
+            groups.setdefault(_ref_key(c), []).append(c)
+        refs = {}
+        for key, group in groups.items():
+            text = self.plan.scenes[key[0]]
+            scene = case_scene(*text, key[1])
+            horizon = max(case_duration(c, scene) for c in group)
+            rate = _common_rate({float(case_settings(c, scene).rate) for c in group})
+            refs[key] = client.submit(reference_for, *text, key[1], horizon, rate, pure=False)
+        return refs
 
 
 def run_sweep(
@@ -164,83 +360,20 @@ def run_sweep(
     resume: bool = False,
     progress: bool = True,
     on_row: Callable[[dict], None] | None = None,
+    overwrite: bool = False,
 ) -> dict:
-    """Run every case of ``spec`` not yet in ``out`` (with ``resume``) and write the table.
+    """Check ``spec``, then run every case not yet in ``out`` and write the table.
 
-    Returns
-    -------
-    dict
-        ``rows`` (cases in the spec), ``run`` (this time), ``skipped`` (finished before),
-        ``failed`` (rows whose status is not ``ok``), ``wall_time`` (s), ``csv``, ``parquet``
-        and ``interrupted``.
+    See :class:`Sweep` (the checks, before anything is written) and :meth:`Sweep.run` (the
+    summary returned).
     """
-    from distributed import as_completed
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    cases = spec.cases()
-    check_cases(spec, cases)
-    columns = spec.columns + list(MEASURES)
-    table = out / RESULTS_CSV
-    done_keys = _finished_keys(table, columns) if resume and table.exists() else set()
-    todo = [c for c in cases if c.key not in done_keys]
-    client = engine.client
-    references = _references(spec, todo, client) if spec.reference else {}
-    batches = _batches(todo, engine.n_workers)
-    futures = [
-        client.submit(_run_batch, batch, references.get(_ref_key(batch[0])),
-                      key=f"cases-{batch[0].key}-{len(batch)}-{os.getpid()}", pure=False)
-        for batch in batches
-    ]
-    bar = SweepProgress(len(todo), progress)
-    failed = 0
-    started = time.perf_counter()
-    interrupted = False
-    mode = "a" if resume and table.exists() else "w"
-    # SIGINT/SIGTERM only set a flag (logs.signals): nothing inside Dask is interrupted, and the
-    # loop stops at the next finished batch, keeping every row written.
-    with StopSignals() as stop, table.open(mode, newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-        if mode == "w":
-            writer.writeheader()
-        n = 0
-        try:
-            for fut in as_completed(futures):
-                if stop.requested:
-                    break
-                try:
-                    rows = fut.result()
-                except Exception as exc:  # a worker died or a run raised: rows with why
-                    batch = batches[futures.index(fut)]
-                    rows = [{**case.as_row(), **dict.fromkeys(MEASURES), "status": "error",
-                             "message": f"{type(exc).__name__}: {exc}"} for case in batch]
-                for row in rows:
-                    writer.writerow({k: _cell(row.get(k)) for k in columns})
-                    failed += row.get("status") != "ok"
-                    if on_row is not None:
-                        on_row(row)
-                f.flush()
-                n += len(rows)
-                bar.update(n, failed)
-        except KeyboardInterrupt:  # a signal handler other than ours (not the main thread)
-            interrupted = True
-        if stop.requested:
-            interrupted = True
-        if interrupted:
-            client.cancel(futures)
-        bar.update(n, failed, final=True)
-    parquet = write_parquet(table, out / RESULTS_PARQUET)
-    return {
-        "rows": len(cases), "run": len(todo), "skipped": len(cases) - len(todo), "failed": failed,
-        "wall_time": time.perf_counter() - started, "csv": str(table), "parquet": str(parquet),
-        "interrupted": interrupted,
-    }
+    return Sweep(spec, out, resume, overwrite).run(engine, progress, on_row)
 
 
-def _run_batch(cases: list[Case], reference) -> list[dict]:
+def _run_batch(cases: list[Case], scene_text: tuple[str, str], reference) -> list[dict]:
     from vjm_ros.studies.sweep.run import run_case
 
-    return [run_case(case, reference) for case in cases]
+    return [run_case(case, scene_text, reference) for case in cases]
 
 
 BATCHES_PER_WORKER = 25
@@ -266,31 +399,6 @@ def _ref_key(case: Case) -> tuple:
     return case.scene, json.dumps(case.parameters, sort_keys=True)
 
 
-def _references(spec: SweepSpec, cases: Sequence[Case], client) -> dict:
-    """One reference future per scene and parameter set, at a rate every case's rate divides."""
-    from vjm_ros.studies.sweep.run import reference_for
-
-    groups: dict[tuple, list[Case]] = {}
-    for c in cases:
-        groups.setdefault(_ref_key(c), []).append(c)
-    refs = {}
-    for key, group in groups.items():
-        scene = case_scene(*key)
-        horizon = max(case_duration(c, scene) for c in group)
-        rates = {float(case_settings(c, scene).rate) for c in group if _settles(c, scene)}
-        rate = _common_rate(rates)
-        refs[key] = client.submit(reference_for, key[0], key[1], horizon, rate, pure=False)
-    return refs
-
-
-def _settles(case: Case, scene) -> bool:
-    try:
-        case_settings(case, scene)
-    except (ConfigurationError, ValueError):
-        return False
-    return True
-
-
 def _common_rate(rates: set[float]) -> float:
     """The smallest rate (Hz) that every integer rate divides, if at most 10 kHz; else 1 kHz."""
     if rates and all(r == int(r) for r in rates):
@@ -298,12 +406,3 @@ def _common_rate(rates: set[float]) -> float:
         if lcm <= 10_000:
             return float(lcm)
     return 1000.0
-
-
-def write_parquet(csv_path: Path, parquet_path: Path) -> Path:
-    """The CSV table as Parquet (columns typed by pyarrow's CSV reader)."""
-    import pyarrow.csv as pacsv
-    import pyarrow.parquet as pq
-
-    pq.write_table(pacsv.read_csv(csv_path), parquet_path)
-    return parquet_path

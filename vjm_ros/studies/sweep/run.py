@@ -13,11 +13,13 @@ import dataclasses
 import functools
 import json
 import math
+from pathlib import Path
 
 import yaml
 
 from vjm_ros.core.errors import ConfigurationError, VjmError
 from vjm_ros.scene import Scene, load_scene, parse_scene
+from vjm_ros.scene.loader import builtin_scenes
 from vjm_ros.scene.safe_yaml import SceneLoader
 from vjm_ros.sim.settings import SimulationSettings, resolve_settings
 from vjm_ros.studies.bench.grid import FAILED, RowConfig
@@ -41,51 +43,74 @@ def _named_parts(doc: dict):
                    joint.get("name", f"{cname}_joint{i + 1}"), joint)
 
 
-@functools.lru_cache(maxsize=64)
-def case_scene(scene: str, parameters: str) -> Scene:
-    """The scene with a case's parameters applied (``parameters``: JSON of the case's dict).
+def apply_parameters(base: Scene, parameters: dict, where=lambda key: f"grid.{key}") -> Scene:
+    """The scene with a case's parameters applied.
 
     ``mass|length|inertia.<link>`` set the link's value; ``initial.<joint>`` the joint's initial
     value (``angle`` in the file's unit for a revolute joint, ``slide`` in m for a prismatic
     one; joints the scene assembles are solved again); ``effort.<joint>`` the actuator's
     constant effort. The modified document is validated and assembled like any scene file.
+    ``where(key)`` names the spec key of a parameter in messages.
 
     Raises
     ------
     ConfigurationError
         A parameter names a link, joint or actuator the scene does not have.
+    SceneError
+        The modified scene is not valid (a mass that is not positive, a pose that cannot close).
     """
-    base = load_scene(scene)
-    params = json.loads(parameters)
-    if not params:
+    if not parameters:
         return base
     doc = json.loads(json.dumps(yaml.load(base.text, Loader=SceneLoader)))  # noqa: S506
     parts = list(_named_parts(doc))
-    for key, value in params.items():
+    for key, value in parameters.items():
         kind, _, name = key.partition(".")
         if kind in ("mass", "length", "inertia"):
             links = [link for lname, link, _, _ in parts if lname == name]
             if not links:
                 raise ConfigurationError(
-                    f"grid.{key}: expected a link of {base.name} "
+                    f"{where(key)}: expected a link of {base.name} "
                     f"({', '.join(p[0] for p in parts)}), found {name!r}")
             links[0][kind] = value
         elif kind == "initial":
             joints = [joint for _, _, jname, joint in parts if jname == name]
             if not joints:
                 raise ConfigurationError(
-                    f"grid.{key}: expected a joint of {base.name} "
+                    f"{where(key)}: expected a joint of {base.name} "
                     f"({', '.join(p[2] for p in parts)}), found {name!r}")
             joints[0]["slide" if joints[0].get("type") == "prismatic" else "angle"] = value
         elif kind == "effort":
             acts = [a for a in doc.get("actuators") or [] if a.get("joint") == name]
             if not acts:
                 raise ConfigurationError(
-                    f"grid.{key}: expected an actuated joint of {base.name} "
+                    f"{where(key)}: expected an actuated joint of {base.name} "
                     f"({', '.join(a.get('joint', '?') for a in doc.get('actuators') or [])}), "
                     f"found {name!r}")
             acts[0]["effort"] = value
-    return parse_scene(yaml.safe_dump(doc, sort_keys=False), source=f"{scene} with {parameters}")
+    source = f"{base.name} with {json.dumps(parameters, sort_keys=True)}"
+    return parse_scene(yaml.safe_dump(doc, sort_keys=False), source=source)
+
+
+@functools.lru_cache(maxsize=8)
+def _base_scene(text: str, source: str) -> Scene:
+    return parse_scene(text, source)
+
+
+@functools.lru_cache(maxsize=64)
+def case_scene(text: str, source: str, parameters: str) -> Scene:
+    """The scene of YAML ``text`` (named ``source``) with a case's parameters applied
+    (``parameters``: JSON of the case's dict), see :func:`apply_parameters`.
+
+    The text, never a path, travels to the workers: a worker on another machine or in another
+    directory runs the same scene as the client.
+    """
+    return apply_parameters(_base_scene(text, source), json.loads(parameters))
+
+
+def scene_source(scene: str) -> tuple[str, str]:
+    """``(text, source)`` of a built-in scene name or a scene file path, read here."""
+    loaded = load_scene(scene)
+    return loaded.text, scene if scene in builtin_scenes() else str(Path(scene).resolve())
 
 
 def case_duration(case: Case, scene: Scene) -> float:
@@ -99,20 +124,23 @@ def case_settings(case: Case, scene: Scene) -> SimulationSettings:
     return resolve_settings(scene.defaults, scene.gains, **given)
 
 
-def reference_for(scene: str, parameters: str, horizon: float, rate: float) -> Reference:
+def reference_for(text: str, source: str, parameters: str, horizon: float,
+                  rate: float) -> Reference:
     """The exact reference of a scene and parameter set (shared by all its runs)."""
-    return compute_reference(case_scene(scene, parameters), horizon, rate, check=False)
+    return compute_reference(case_scene(text, source, parameters), horizon, rate, check=False)
 
 
-def run_case(case: Case, reference: Reference | None = None) -> dict:
+def run_case(case: Case, scene_text: tuple[str, str],
+             reference: Reference | None = None) -> dict:
     """Run one case; a row of the results table (its identity, then :data:`MEASURES`).
 
-    Never raises for a case that cannot run: the row says why (``status`` ``error``,
+    ``scene_text`` is ``(text, source)`` of the case's scene (:func:`scene_source`). Never
+    raises for a case that cannot run: the row says why (``status`` ``error``,
     ``refused (stiffness)`` or ``diverged``, and ``message``).
     """
     row = dict(case.as_row())
     try:
-        scene = case_scene(case.scene, json.dumps(case.parameters, sort_keys=True))
+        scene = case_scene(*scene_text, json.dumps(case.parameters, sort_keys=True))
         settings = case_settings(case, scene)
         duration = case_duration(case, scene)
     except (VjmError, ValueError, TypeError) as exc:

@@ -1,0 +1,91 @@
+"""What ``vjm sweep`` tells a reader at the end: a few lines of counts, and a figure on request.
+
+The lines say how many rows the table holds per status, how many ran this time and how many were
+kept from before, the wall time and where the table is. The figure (``--figure Y,X``) plots one
+measure against another for every row that ran, one colour per setting of the grid's first
+axis that takes words (the integrator, say), else per scene.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.studies.sweep.run import MEASURES
+from vjm_ros.studies.sweep.spec import SweepSpec
+
+PLOTTABLE = tuple(m for m in MEASURES if m not in ("status", "message", "finite"))
+"""Measures a figure can show."""
+
+
+def summary_lines(result: dict) -> list[str]:
+    """Human-readable lines of a sweep's result (the dict of :meth:`Sweep.run`)."""
+    counts = ", ".join(f"{n} {status}" for status, n in result["statuses"].items() if n)
+    total = sum(result["statuses"].values())
+    lines = [f"{total} rows in {result['csv']} (and {result['parquet']}): {counts or 'none'}",
+             f"{result['run']} run this time, {result['skipped']} kept from before"
+             + (f", {result['retried']} 'error' rows run again" if result.get("retried") else "")
+             + (f", {result['dropped']} rows no longer in the spec dropped"
+                if result.get("dropped") else "")
+             + (f", {result['same_as_another']} the same run as another row (filled from it, "
+                "see message)" if result.get("same_as_another") else "")
+             + f"; {result['wall_time']:.1f} s"]
+    if result.get("figure"):
+        lines.append(f"figure: {result['figure']}")
+    return lines
+
+
+def parse_figure(text: str, spec: SweepSpec) -> tuple[str, str]:
+    """``Y,X`` of ``--figure``: two measures.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming ``--figure`` and the measures it may take.
+    """
+    names = [t.strip() for t in text.split(",")]
+    if len(names) != 2 or not all(n in PLOTTABLE for n in names):
+        raise ConfigurationError(
+            f"--figure: expected two measures Y,X of {', '.join(PLOTTABLE)}, found {text!r}")
+    return names[0], names[1]
+
+
+def _group_key(spec: SweepSpec) -> str:
+    for name, values in spec.axes.items():
+        if any(isinstance(v, str) for v in values):
+            return name
+    return "scene"
+
+
+def plot_sweep(sweep, y: str, x: str, path: str | Path) -> Path:
+    """Measure ``y`` against ``x`` of every row of the table with both (PNG, log axes where the
+    values are positive)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from vjm_ros.studies.sweep.tune import read_rows
+
+    rows = [r for r in read_rows(sweep.start.path)
+            if isinstance(r.get(x), float) and isinstance(r.get(y), float)
+            and math.isfinite(r[x]) and math.isfinite(r[y])]
+    group = _group_key(sweep.spec)
+    fig, ax = plt.subplots(figsize=(7.0, 4.6), dpi=110)
+    for value in dict.fromkeys(str(r.get(group)) for r in rows):
+        mine = [r for r in rows if str(r.get(group)) == value]
+        ax.scatter([r[x] for r in mine], [r[y] for r in mine], s=18, label=f"{group} {value}")
+    for axis, name in ((ax.set_xscale, x), (ax.set_yscale, y)):
+        if rows and all(r[name] > 0 for r in rows):
+            axis("log")
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+    ax.set_title(f"{sweep.spec.name}: {len(rows)} rows with both measures", fontsize=9)
+    ax.grid(True, which="both", lw=0.3, alpha=0.5)
+    if rows:
+        ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
