@@ -24,6 +24,7 @@ topic                           type                                      when
 ``/diagnostics``                ``diagnostic_msgs/DiagnosticArray``       1 Hz (wall)
 ``~/events``                    ``std_msgs/String``                       pause, step, reset, timeouts
 ``~/scene_description``         ``std_msgs/String`` (transient local)     at start and new scenes
+``robot_description`` (relative) ``std_msgs/String`` (transient local)    same: the scene's URDF
 ``~/effort_commands`` (in)      ``std_msgs/Float64MultiArray``            one value per actuator
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
 ==============================  ========================================  =========================
@@ -86,6 +87,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from vjm_ros.core.errors import ConfigurationError, DivergenceError, VjmError
+from vjm_ros.formats.urdf_out import scene_urdf
 from vjm_ros.logs import events
 from vjm_ros.logs.opening import open_recorders as open_log_recorders
 from vjm_ros.realtime.commands import CommandBuffer, Throttle, Verdict
@@ -294,6 +296,7 @@ class SimNode(Node):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._scene_pub = self.create_publisher(String, "~/scene_description", latched)
+        self._description_pub = self.create_publisher(String, "robot_description", latched)
         # the tick loop's per-tick messages are serialized bytes (TickWire, MarkerWire)
         self._send_joints = raw_publish(self._joint_pub)
         self._send_forces = raw_publish(self._forces_pub)
@@ -345,8 +348,10 @@ class SimNode(Node):
         self.loop.options = self._options(simulator)
 
     def _publish_scene(self) -> None:
-        """``~/scene_description``: the scene YAML with its assembled initial state (latched)."""
+        """``~/scene_description``: the scene YAML with its assembled initial state, and
+        ``robot_description``: its URDF, joint positions = joint coordinates (both latched)."""
         self._scene_pub.publish(String(data=assembled_scene_yaml(self.scene)))
+        self._description_pub.publish(String(data=scene_urdf(self.scene.model)))
 
     def clock(self, t: float) -> None:
         """Publish ``/clock`` (opening its publisher when ``publish_clock`` was turned on)."""
