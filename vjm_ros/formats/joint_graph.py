@@ -262,6 +262,9 @@ class _Reducer:
         if end is not None:
             options += [(m, False) for m in self.moves[end] if m[1] not in covered]
         options += [(m, True) for m in self.moves[WORLD] if m[1] not in covered]
+        # the best-ranked joint first (actuated, of the tree, walked forward), then the one
+        # written first: among equals, the joints written last close the loops
+        options.sort(key=lambda o: (o[0][0], o[1]))
         for (_, dst, j, forward), new_chain in options:
             if new_chain:
                 chains.append([])
