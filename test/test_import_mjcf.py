@@ -32,28 +32,65 @@ def imported():
     return run(load_scene(MODELS / "five_bar.xml"), 1.0, efforts=CONTROLS)
 
 
-def test_coordinates_are_mujocos_qpos_along_a_driven_motion(imported):
-    """MuJoCo runs the same file at tight settings: RK4 at 0.1 ms and connect equalities stiff
-    (solref 2 ms, solimp 0.99999). Its soft constraint is the difference left: halving both
-    time constants took the gap from 6e-7 to 2e-7 rad; 2e-6 rad bounds it over 1 s of motion
-    spanning more than 3 rad per joint."""
-    m = mujoco.MjModel.from_xml_path(str(MODELS / "five_bar.xml"))
+def mujoco_qpos(path, seconds: float = 1.0) -> np.ndarray:
+    """MuJoCo's ``qpos`` at every 1 ms over ``seconds``, the file run at tight settings: RK4 at
+    0.1 ms and equality constraints stiff (solref 2 ms, solimp 0.99999), shape (ticks, nq)."""
+    m = mujoco.MjModel.from_xml_path(str(path))
     m.opt.timestep = 1e-4
     m.eq_solref[:] = [2e-3, 1.0]
     m.eq_solimp[:] = [0.99999, 0.99999, 0.001, 0.5, 2]
     d = mujoco.MjData(m)
     d.ctrl[:] = CONTROLS
     qpos = []
-    for _ in range(1000):
+    for _ in range(int(round(seconds * 1000))):
         for _ in range(10):
             mujoco.mj_step(m, d)
         qpos.append(d.qpos.copy())
-    qpos = np.array(qpos)
+    return np.array(qpos)
+
+
+def test_coordinates_are_mujocos_qpos_along_a_driven_motion(imported):
+    """MuJoCo's soft constraint is the difference left: halving its time constants and step
+    took the gap from 6e-7 to 2e-7 rad; 2e-6 rad bounds it over 1 s of motion spanning more
+    than 3 rad per joint."""
+    qpos = mujoco_qpos(MODELS / "five_bar.xml")
+    m = mujoco.MjModel.from_xml_path(str(MODELS / "five_bar.xml"))
     assert math.isclose(m.qpos0[3], math.radians(20.0))
     assert imported["q"]["right_elbow"][0] == pytest.approx(math.radians(20.0), abs=0.05)
     for k, joint in enumerate(JOINTS):
         assert np.ptp(qpos[:, k]) > 2.0
         np.testing.assert_allclose(imported["q"][joint], qpos[:, k], rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("variant, closures", [
+    ("sites", ["pin_joint"]),
+    ("weld", ["pin_joint", "pin_joint_angle"]),
+])
+def test_site_connect_and_weld_follow_mujoco(tmp_path, variant, closures):
+    """The pin written between two sites, or as a weld (which also locks the distal links'
+    relative angle: a four-bar whose coupler is the two distal links), against MuJoCo as
+    above (2e-6 rad)."""
+    text = (MODELS / "five_bar.xml").read_text()
+    if variant == "sites":
+        text = text.replace('<geom fromto="0 0 0 0.5 0 0"/>\n      </body>',
+                            '<geom fromto="0 0 0 0.5 0 0"/>\n        '
+                            '<site name="pin_r" pos="0.5 0 0"/>\n      </body>')
+        text = text.replace('body1="left_distal" body2="right_distal" anchor="0.5 0 0"',
+                            'site1="pin" site2="pin_r"')
+    else:
+        text = text.replace('<connect name="pin_joint" body1="left_distal" body2="right_distal" '
+                            'anchor="0.5 0 0"/>',
+                            '<weld name="pin_joint" body1="left_distal" body2="right_distal"/>')
+    path = tmp_path / "five_bar.xml"
+    path.write_text(text)
+    assert text != (MODELS / "five_bar.xml").read_text()
+    scene = load_scene(path)
+    assert scene.model.closure_names == closures
+    ours = run(scene, 1.0, efforts=CONTROLS)
+    qpos = mujoco_qpos(path)
+    for k, joint in enumerate(JOINTS):
+        assert np.ptp(qpos[:, k]) > 0.3
+        np.testing.assert_allclose(ours["q"][joint], qpos[:, k], rtol=0, atol=2e-6)
 
 
 def test_masses_from_capsules_and_the_hand_written_five_bar(imported):
