@@ -141,6 +141,9 @@ FULL_SUITE = ("collection only: the default suite runs this very command in CI a
               "collecting checks the command, the configuration and every test module's imports")
 NODE_DURATION = "the node runs until SIGINT without a duration: 1 s of simulated time here"
 SIGINT_END = "runs until SIGINT: stopped with SIGINT once the simulator it drives has ended"
+NO_VIEWERS = ("robot_state_publisher, RViz and foxglove_bridge come with a ROS 2 install, not "
+              "with the ROS 2 wheels of .venv (rclpy and message packages only), and the viewers "
+              "need a display")
 SET_UP = "set-up from nothing, in a fresh clone (never the shared .venv); minutes of downloads"
 
 COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
@@ -197,6 +200,12 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
         Run(why="run.mcap from `vjm run SCENE --mcap run.mcap`, as the section says",
             before=".venv/bin/vjm run four_bar --duration 0.02 --mcap run.mcap",
             after=prints_the_topics),
+    ),
+    "ros2 run robot_state_publisher robot_state_publisher --ros-args -p use_sim_time:=true "
+    "-p robot_description:=\"$(cat five_bar.urdf)\"": (SyntaxOnly(NO_VIEWERS, tools=()),),
+    "rviz2 --ros-args -p use_sim_time:=true": (SyntaxOnly(NO_VIEWERS, tools=()),),
+    "ros2 launch foxglove_bridge foxglove_bridge_launch.xml use_sim_time:=true": (
+        SyntaxOnly(NO_VIEWERS, tools=()),
     ),
     # CONTRIBUTING.md and docs/troubleshooting.md
     "bash scripts/setup": (Run(why=SET_UP, slow=True, where="clone", timeout=SETUP_GUARD),),
