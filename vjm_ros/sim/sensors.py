@@ -50,11 +50,19 @@ class SensorModel:
         self.noise = np.array([ch.noise for ch in spec.channels], dtype=float)
         self.bias = np.array([ch.bias for ch in spec.channels], dtype=float)
         self.resolution = np.array([ch.resolution for ch in spec.channels], dtype=float)
-        self._noisy = self.noise > 0
-        self._quantized = self.resolution > 0
-        self._step = np.where(self._quantized, self.resolution, 1.0)
+        noise, resolution = self.noise.reshape(-1), self.resolution.reshape(-1)
+        self._noisy = np.flatnonzero(noise > 0)
+        self._sigma = noise[self._noisy]
+        self._quantized = np.flatnonzero(resolution > 0)
+        self._step = resolution[self._quantized]
+        # the same, as Python numbers: a single tick is cheaper in scalar code than in numpy
+        self._noisy_pairs = list(zip(self._noisy.tolist(), self._sigma.tolist(), strict=True))
+        self._quantized_pairs = list(zip(self._quantized.tolist(), self._step.tolist(),
+                                         strict=True))
         self.rng = np.random.Generator(np.random.PCG64(spec.seed))
-        self._past = np.zeros((0,) + self.noise.shape)
+        self._ring = np.zeros((self.delay,) + self.noise.shape)
+        """The last ``delay`` exact states, the oldest at :attr:`_head`."""
+        self._head = 0
 
     def reset(self, exact: np.ndarray) -> np.ndarray:
         """Restart the stream from the seed at a start state; its measurement.
@@ -69,8 +77,36 @@ class SensorModel:
         ndarray, shape (3, n)
         """
         self.rng = np.random.Generator(np.random.PCG64(self.spec.seed))
-        self._past = np.repeat(np.asarray(exact, dtype=float)[None], self.delay, axis=0)
-        return self.measure(exact[None])[0]
+        self._ring = np.repeat(np.asarray(exact, dtype=float)[None], self.delay, axis=0)
+        self._head = 0
+        return self.measure_one(exact)
+
+    def measure_one(self, exact: np.ndarray) -> np.ndarray:
+        """The measurement of one tick (the same numbers as :meth:`measure` of one row).
+
+        Parameters
+        ----------
+        exact : ndarray, shape (3, n)
+            The exact state at the end of the tick.
+
+        Returns
+        -------
+        ndarray, shape (3, n)
+        """
+        if self.delay:
+            value = self._ring[self._head] + self.bias
+            self._ring[self._head] = exact
+            self._head = (self._head + 1) % self.delay
+        else:
+            value = exact + self.bias
+        flat = value.reshape(-1)
+        if self._noisy_pairs:
+            draws = self.rng.standard_normal(len(self._noisy_pairs)).tolist()
+            for (k, sigma), e in zip(self._noisy_pairs, draws, strict=True):
+                flat[k] += sigma * e
+        for k, step in self._quantized_pairs:
+            flat[k] = round(flat[k] / step) * step  # half to even, as numpy's round
+        return value
 
     def measure(self, exact: np.ndarray) -> np.ndarray:
         """Measurements of consecutive ticks.
@@ -86,14 +122,14 @@ class SensorModel:
         """
         rows = len(exact)
         if self.delay:
-            stream = np.concatenate((self._past, exact))
-            value, self._past = stream[:rows].copy(), stream[rows:].copy()
+            past = np.roll(self._ring, -self._head, axis=0)  # oldest first
+            stream = np.concatenate((past, exact))
+            value, self._ring, self._head = stream[:rows] + self.bias, stream[rows:].copy(), 0
         else:
-            value = np.array(exact, dtype=float)
-        value += self.bias
-        if self._noisy.any():
-            draws = self.rng.standard_normal((rows, int(self._noisy.sum())))
-            value[:, self._noisy] += self.noise[self._noisy] * draws
-        if self._quantized.any():
-            value = np.where(self._quantized, np.round(value / self._step) * self._step, value)
+            value = exact + self.bias
+        flat = value.reshape(rows, -1)
+        if len(self._noisy):
+            flat[:, self._noisy] += self._sigma * self.rng.standard_normal((rows, len(self._noisy)))
+        if len(self._quantized):
+            flat[:, self._quantized] = np.round(flat[:, self._quantized] / self._step) * self._step
         return value

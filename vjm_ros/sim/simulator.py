@@ -268,7 +268,9 @@ class Simulator:
 
     def _exact_state(self) -> np.ndarray:
         """Position, velocity and applied effort now, shape (3, n)."""
-        return np.stack((self.q, self.qd, self.tau))
+        exact = np.empty((3, self.model.n))
+        exact[0], exact[1], exact[2] = self.q, self.qd, self.tau
+        return exact
 
     def set_efforts(self, efforts: np.ndarray) -> np.ndarray:
         """Hold actuator commands for the following ticks, clamped to the scene's limits.
@@ -319,7 +321,7 @@ class Simulator:
         self._tick_actuators()
         self._step()
         if self.sensors is not None:
-            self.measured = self.sensors.measure(self._exact_state()[None])[0]
+            self.measured = self.sensors.measure_one(self._exact_state())
 
     def _tick_actuators(self) -> None:
         """The efforts of the next tick (:attr:`tau`), when the actuators have dynamics."""
@@ -408,11 +410,18 @@ class Simulator:
         rows, n = block.rows, self.model.n
         if block.measured is None or len(block.measured) != len(block.t):
             block.measured = np.zeros((len(block.t), 3, n))
+        if rows == 1:  # the node's tick: the scalar path
+            exact = np.empty((3, n))
+            exact[0], exact[1] = block.q[0], block.qd[0]
+            exact[2] = block.effort[0] if block.effort.ndim == 2 else block.effort
+            self.measured = self.sensors.measure_one(exact)
+            block.measured[0] = self.measured
+            return
         if not rows:
             return
-        effort = (block.effort[:rows] if block.effort.ndim == 2
-                  else np.broadcast_to(block.effort, (rows, n)))
-        exact = np.stack((block.q[:rows], block.qd[:rows], effort), axis=1)
+        exact = np.empty((rows, 3, n))
+        exact[:, 0], exact[:, 1], exact[:, 2] = block.q[:rows], block.qd[:rows], (
+            block.effort[:rows] if block.effort.ndim == 2 else block.effort)
         block.measured[:rows] = self.sensors.measure(exact)
         self.measured = block.measured[rows - 1].copy()
 
@@ -596,6 +605,8 @@ class Simulator:
         # it, in order: numpy's pairwise sums differ in the last bit from 8 rows on)
         dissipation = (_sum_in_order(mech.method.kv * ev.closure.rate**2) if mech.is_penalty
                        else 0.0)
+        if model.has_plant_terms:  # viscous joint damping, c qd^2, summed after the closures
+            dissipation = _sum_in_order(np.concatenate(([dissipation], model.damping * self.qd**2)))
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
