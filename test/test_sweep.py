@@ -23,9 +23,10 @@ import pytest
 import yaml
 
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.studies.sweep.engine import RESULTS_CSV, RESULTS_PARQUET, Engine, run_sweep
+from vjm_ros.studies.sweep.engine import RESULTS_CSV, RESULTS_PARQUET, Engine, Sweep, run_sweep
 from vjm_ros.studies.sweep.run import MEASURES
-from vjm_ros.studies.sweep.spec import SpecError, parse_spec
+from vjm_ros.studies.sweep.spec import SpecError, load_spec, parse_spec
+from vjm_ros.studies.sweep.table import cell
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = """
@@ -122,6 +123,96 @@ def test_resume_runs_only_the_missing_rows(engine, tmp_path):
     assert len(rows) == 8 and len({r["key"] for r in rows}) == 8
 
 
+def test_a_resumed_table_keeps_to_the_spec_and_runs_error_rows_again(engine, tmp_path):
+    spec = parse_spec(SPEC, "small.yaml")
+    run_sweep(spec, tmp_path, engine, progress=False)
+    table = tmp_path / RESULTS_CSV
+    rows = rows_of(tmp_path)
+    lost = next(r for r in rows if r["omega_n"] == "60" and r["status"] == "ok")
+    # one ok row becomes an error row, as a lost worker leaves it
+    text = table.read_text()
+    line = next(x for x in text.splitlines() if x.startswith(lost["key"]))
+    names = list(lost)
+    error = {**lost, **dict.fromkeys(MEASURES, ""), "status": "error",
+             "message": "KilledWorker: lost"}
+    table.write_text(text.replace(line, ",".join(error[k] for k in names)))
+    shrunk = parse_spec(SPEC.replace("omega_n: [60, 5000]", "omega_n: [60]"), "small.yaml")
+    again = run_sweep(shrunk, tmp_path, engine, resume=True, progress=False)
+    assert (again["dropped"], again["retried"], again["skipped"], again["run"]) == (4, 1, 3, 1)
+    after = rows_of(tmp_path)
+    assert sorted(r["key"] for r in after) == sorted(c.key for c in shrunk.cases())
+    assert {r["key"]: r["status"] for r in after}[lost["key"]] == "ok"
+    assert again["statuses"] == {"ok": 4}
+
+
+def test_workers_elsewhere_run_a_scene_file_named_by_a_relative_path(engine, tmp_path,
+                                                                     monkeypatch):
+    from vjm_ros.scene import load_scene
+
+    # the workers run in the directory the cluster started in; the spec's scene is a file
+    # relative to this one, which they cannot see
+    monkeypatch.chdir(tmp_path)
+    Path("my_four_bar.yaml").write_text(load_scene("four_bar").text)
+    spec = parse_spec("scenes: [my_four_bar.yaml]\nduration: 0.05\n"
+                      "settings: {closure: exact}\n", "s.yaml")
+    result = run_sweep(spec, "out", engine, progress=False)
+    rows = rows_of(tmp_path / "out")
+    assert [r["status"] for r in rows] == ["ok"], rows
+    assert float(rows[0]["position_deviation"]) >= 0  # the reference ran on a worker too
+    assert result["errors"] == 0
+
+
+def test_runs_that_are_one_computation_run_once_and_say_so(engine, tmp_path):
+    from vjm_ros.studies.sweep.run import run_case, scene_source
+
+    spec = parse_spec(
+        "scenes: [four_bar]\nduration: 0.05\nreference: false\ngrid:\n"
+        "  closure: [penalty, exact]\n  integrator: [semi_implicit_euler, implicit_euler]\n"
+        "  omega_n: [60, 120]\n  projection: [false, true]\n", "dup.yaml")
+    sweep = Sweep(spec, tmp_path)
+    # exact: one run per projection (gains and implicit_euler make no difference);
+    # penalty: one per integrator and omega_n (projection makes none)
+    assert len(sweep.plan.cases) == 16 and len(sweep.plan.same_as) == 16 - 2 - 4
+    result = sweep.run(engine, progress=False)
+    assert result["same_as_another"] == 10 and result["run"] == 16
+    rows = {r["key"]: r for r in rows_of(tmp_path)}
+    scene = scene_source("four_bar")
+    for case in sweep.plan.cases:
+        if case.key not in sweep.plan.same_as:
+            continue
+        first, why = sweep.plan.same_as[case.key]
+        assert rows[case.key]["message"].startswith(f"same run as row {first} (")
+        # the claim checked by running the repeated row as it is: every measure the same
+        ran = run_case(case, scene)
+        for m in MEASURES:
+            if m not in ("wall_time", "message"):
+                assert cell(ran[m]) == rows[first][m], (case.settings, m, why)
+
+
+def test_every_example_spec_runs(engine, tmp_path):
+    for path in sorted((ROOT / "examples").glob("*.yaml")):
+        spec = load_spec(path)
+        spec.duration, spec.reference = 0.02, False  # every row, briefly
+        result = run_sweep(spec, tmp_path / path.stem, engine, progress=False)
+        assert result["run"] == result["rows"] == len(spec.cases())
+        assert result["errors"] == 0, result
+
+
+def test_the_summary_and_the_figure_of_a_sweep(engine, tmp_path):
+    from vjm_ros.studies.sweep.summary import plot_sweep, summary_lines
+
+    spec = parse_spec(SPEC, "small.yaml")
+    sweep = Sweep(spec, tmp_path)
+    result = sweep.run(engine, progress=False)
+    lines = summary_lines(result)
+    ok = sum(r["status"] == "ok" for r in rows_of(tmp_path))
+    assert lines[0] == (f"8 rows in {tmp_path / RESULTS_CSV} (and {tmp_path / RESULTS_PARQUET})"
+                        f": {ok} ok, {8 - ok} refused (stiffness)")
+    assert lines[1].startswith("8 run this time, 0 kept from before; ")
+    figure = plot_sweep(sweep, "max_closure_error", "wall_time", tmp_path / "sweep.png")
+    assert figure.stat().st_size > 10_000
+
+
 def test_scene_parameters_change_the_mechanism(engine, tmp_path):
     spec = parse_spec(
         "scenes: [four_bar]\nduration: 0.05\nsettings: {closure: exact}\nreference: false\n"
@@ -188,6 +279,10 @@ def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
     assert result["interrupted"]
     rows = rows_of(out)
     assert 2 <= len(rows) < 320
+    # what ran, what is left, and how to run it
+    assert (result["run"], result["left"]) == (len(rows), 320 - len(rows))
+    assert (f"interrupted after {len(rows)} of 320 rows ({320 - len(rows)} left); to run the "
+            f"rest: vjm sweep {spec} --out {out} --resume --workers 2") in stderr
     assert all(r["status"] in ("ok", "refused (stiffness)", "diverged") for r in rows)
     assert pq.read_table(out / RESULTS_PARQUET).num_rows == len(rows)
     deadline = time.monotonic() + 30  # a hang guard: processes need a moment to exit
@@ -198,6 +293,7 @@ def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
     assert workers and not alive, alive
 
 
+@pytest.mark.slow  # a local cluster of its own and 60 runs: ~15 s
 def test_tune_writes_the_best_gains_as_a_loadable_snippet(tmp_path):
     out = tmp_path / "tune"
     done = subprocess.run(

@@ -296,3 +296,15 @@ def test_the_summary_names_every_count():
     assert second == ("6 run this time, 2 kept from before, 1 'error' rows run again, 3 rows no "
                       "longer in the spec dropped, 2 the same run as another row (filled from "
                       "it, see message); 12.3 s")
+
+
+def test_the_bench_refuses_a_server_that_is_not_a_scheduler(http_server, tmp_path, capsys):
+    from vjm_ros.studies.bench import main as bench_main
+
+    code = bench_main(["--quick", "--no-mujoco", "--no-scaling", "--no-progress", "--out",
+                       str(tmp_path / "bench"), "--cluster", http_server,
+                       "--cluster-timeout", "0.5"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert f"--cluster {http_server}: expected a Dask scheduler to answer within 0.5 s" in err
+    assert not (tmp_path / "bench").exists()

@@ -78,6 +78,8 @@ def _parser() -> argparse.ArgumentParser:
                         "timings then share the machine); default 1: in this process")
     p.add_argument("--cluster", metavar="ADDRESS",
                    help="run the rows on an existing Dask scheduler (tcp://host:port)")
+    p.add_argument("--cluster-timeout", type=float, default=10.0, metavar="S",
+                   help="longest wait for --cluster's scheduler to connect and answer, s (10)")
     return p
 
 
@@ -142,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
             horizon=args.horizon, mujoco=not args.no_mujoco, scaling=not args.no_scaling,
             docs=args.docs, extra=extra, progress=not args.no_progress,
             command="vjm bench " + " ".join(argv), workers=args.workers, cluster=args.cluster,
+            cluster_timeout=args.cluster_timeout,
         )
         results = run_bench(opts)
     except (SceneError, ConfigurationError) as exc:

@@ -338,3 +338,4 @@ class BenchOptions:
     command: str = "vjm bench"
     workers: int = 1
     cluster: str | None = None
+    cluster_timeout: float = 10.0

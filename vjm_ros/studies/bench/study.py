@@ -162,6 +162,10 @@ def run_bench(opts: BenchOptions) -> dict:
     dict
         Everything written to ``results.json``.
     """
+    if opts.cluster:  # refused at once, before the references and the plan
+        from vjm_ros.studies.sweep.engine import check_scheduler
+
+        check_scheduler(opts.cluster, opts.cluster_timeout)
     threads = limit_threads()
     grid = opts.grid or (quick_grid() if opts.quick else full_grid())
     from vjm_ros.studies.compare_mujoco import mujoco_version, version_note
@@ -176,7 +180,7 @@ def run_bench(opts: BenchOptions) -> dict:
     if opts.workers > 1 or opts.cluster:
         from vjm_ros.studies.sweep.engine import Engine  # the sweep engine, on Dask
 
-        engine = Engine(opts.cluster, opts.workers).__enter__()
+        engine = Engine(opts.cluster, opts.workers, opts.cluster_timeout).__enter__()
     meta = _meta(opts, threads, mj_version, version_note(mj_version), grid)
     results: dict = {"meta": {**meta, "kernel": kernel}, "scenes": {}}
     all_rows: dict[str, list[RowResult]] = {}

@@ -117,10 +117,18 @@ def _sweep(args) -> int:
             again += ["--workers", str(args.workers)]
         print(f"vjm sweep: interrupted after {result['run']} of {len(sweep.todo)} rows "
               f"({result['left']} left); to run the rest: {' '.join(again)}", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    if result["run"] and result["errors"] == result["run"]:
+    code = exit_code(result)
+    if code == EXIT_ALL_FAILED:
         print("vjm sweep: every row run failed with an error (see the message column); "
               "--resume runs them again", file=sys.stderr)
+    return code
+
+
+def exit_code(result: dict) -> int:
+    """The exit code of a sweep that ran (see the module documentation)."""
+    if result["interrupted"]:
+        return EXIT_INTERRUPTED
+    if result["run"] and result["errors"] == result["run"]:
         return EXIT_ALL_FAILED
     return 0
 

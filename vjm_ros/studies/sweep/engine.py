@@ -140,7 +140,9 @@ def check_scheduler(address: str, timeout: float = CLUSTER_TIMEOUT) -> None:
             f"address ({exc})") from None
 
     async def identity() -> dict:
-        comm = await asyncio.wait_for(connect(address, timeout=timeout), timeout)
+        # Dask's own bound first (it says what it found: nothing listening, refused); ours
+        # a moment later, for a handshake it would wait for without end
+        comm = await asyncio.wait_for(connect(address, timeout=timeout), 1.5 * timeout)
         try:
             await asyncio.wait_for(comm.write({"op": "identity", "reply": True}), timeout)
             return await asyncio.wait_for(comm.read(), timeout)
