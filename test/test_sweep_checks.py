@@ -308,3 +308,21 @@ def test_the_bench_refuses_a_server_that_is_not_a_scheduler(http_server, tmp_pat
     assert code == 2, err
     assert f"--cluster {http_server}: expected a Dask scheduler to answer within 0.5 s" in err
     assert not (tmp_path / "bench").exists()
+
+
+def test_exit_codes_say_whether_anything_could_run():
+    from vjm_ros.studies.sweep.cli import exit_code
+
+    done = {"interrupted": False, "run": 4, "errors": 0}
+    assert exit_code(done) == 0
+    assert exit_code({**done, "errors": 3}) == 0  # some rows ran: their errors are rows
+    assert exit_code({**done, "errors": 4}) == 1  # nothing could run
+    assert exit_code({**done, "run": 0}) == 0  # nothing left to run (resumed)
+    assert exit_code({**done, "errors": 4, "interrupted": True}) == 130
+
+
+def test_a_figure_of_unknown_measures_is_refused_before_any_cluster(tmp_path, capsys):
+    line = refused(tmp_path, BASE, capsys, "--figure", "max_closure_error,speed")
+    assert "--figure: expected two measures Y,X of status" not in line
+    assert "--figure: expected two measures Y,X of diverged_at, max_closure_error" in line
+    assert line.endswith("found 'max_closure_error,speed'")
