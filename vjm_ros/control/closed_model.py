@@ -146,6 +146,9 @@ class ClosedChainModel:
         Largest closure rate ``|A qd|`` of the rates ``qd`` the dynamics accept, m/s or rad/s;
         default ``closure_tolerance * CLOSURE_RATE`` (1e-3 m/s with the default closure
         tolerance; a penalty-closed simulator's rates are off by up to ~0.2 m/s).
+    plant_terms : bool
+        Whether the dynamics include the scene's joint damping, armature and constant loads
+        (their compensation in the inverse dynamics); default False, the ideal mechanism.
 
     Raises
     ------
@@ -155,7 +158,8 @@ class ClosedChainModel:
 
     def __init__(self, model: Model, independent: Sequence[str] | None = None,
                  closure_tolerance: float = CLOSURE_TOLERANCE,
-                 velocity_tolerance: float | None = None) -> None:
+                 velocity_tolerance: float | None = None, plant_terms: bool = False) -> None:
+        model = model if plant_terms else model.without_plant_terms()
         self.model = model
         self.closure_tolerance = _tolerance(closure_tolerance, "closure_tolerance", "m or rad")
         self.velocity_tolerance = (

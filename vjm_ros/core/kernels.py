@@ -30,17 +30,22 @@ from vjm_ros.core.layout import (
     C_X,
     C_Y,
     EXACT,
+    F_ARMATURE,
     F_INERTIA,
     F_MASS,
     K_OMEGA,
     K_PCOS,
+    K_POMEGA,
     K_PSIN,
     K_SLIDE,
+    K_SLIDE_RATE,
+    L_REV,
     P_ALPHA,
     P_BETA,
     P_GX,
     P_GY,
     P_METHOD,
+    P_PLANT,
     P_RCOND,
     PENALTY,
     R_BIAS,
@@ -58,7 +63,7 @@ from vjm_ros.core.small_linalg import (
     lu_solve_range,
     min_norm_correction,
 )
-from vjm_ros.core.terms import terms
+from vjm_ros.core.terms import load_potential, terms
 from vjm_ros.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this module's interface)
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
@@ -349,6 +354,12 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
                 kinetic += mass * (cm[i, C_VX] * cm[i, C_VX] + cm[i, C_VY] * cm[i, C_VY])
                 kinetic += lflt[i, F_INERTIA] * kin[i, K_OMEGA] * kin[i, K_OMEGA]
                 potential -= mass * (cm[i, C_X] * par[P_GX] + cm[i, C_Y] * par[P_GY])
+            if par[P_PLANT] != 0.0:
+                for i in range(n):  # the evaluated state's rates, as the terms saw them
+                    rate = (kin[i, K_OMEGA] - kin[i, K_POMEGA] if lint[i, L_REV] == 1
+                            else kin[i, K_SLIDE_RATE])
+                    kinetic += lflt[i, F_ARMATURE] * rate * rate
+                potential += load_potential(lflt, kin)
             spring = 0.0
             if par[P_METHOD] == PENALTY:
                 for i in range(r):

@@ -7,15 +7,20 @@ columns of each array are named by the constants below.
 
 
 * ``lint`` int64 (n, 3): revolute flag, first-of-chain flag, index of the chain's first link;
-* ``lflt`` float64 (n, 10): base angle (rad), base origin x, y (m), predecessor length (m), locked
-  angle (rad), locked slide (m), mass (kg), inertia (kg m^2), mass-centre offsets ``p``, ``q`` (m);
+* ``lflt`` float64 (n, 17): base angle (rad), base origin x, y (m), predecessor length (m), locked
+  angle (rad), locked slide (m), mass (kg), inertia (kg m^2), mass-centre offsets ``p``, ``q`` (m),
+  the joint's damping (N m s/rad or N s/m) and armature (kg m^2 or kg), then the loads on the
+  link reduced to a world force ``(Fx, Fy)`` (N) at the link origin and a moment
+  ``A cos(theta) + B sin(theta) + Tz`` (N m), with ``A = sum(s Fy - w Fx)`` and
+  ``B = -sum(s Fx + w Fy)`` over the link's loads at local points ``(s, w)``;
 * ``cint`` int64 (k, 4): closure kind (:data:`HINGE`, :data:`SLIDER`, :data:`ANGLE`), link of
   ``Pa``, link of the target (``-1``: ground), first row;
 * ``cflt`` float64 (k, 7): local ``(s, w)`` of ``Pa`` and of the target (m), line direction,
   angle offset (rad);
 * ``gains`` float64 (r, 2): penalty ``Kp``, ``Kv`` per row (ignored by the exact method);
-* ``par`` float64 (6,): method (0 penalty, 1 exact), Baumgarte ``alpha``, ``beta`` (1/s),
-  ``rcond``, gravity ``gx``, ``gy`` (m/s^2).
+* ``par`` float64 (7,): method (0 penalty, 1 exact), Baumgarte ``alpha``, ``beta`` (1/s),
+  ``rcond``, gravity ``gx``, ``gy`` (m/s^2), and 1 when some joint has damping or armature or a
+  link a load (0: the kernels skip those terms).
 
 Output buffers (fields of :class:`Data`; columns named by the ``K_*``, ``C_*`` and ``R_*``
 constants):
@@ -51,10 +56,12 @@ L_REV, L_FIRST, L_START = 0, 1, 2
 # columns of lflt
 F_BASE_ANGLE, F_BASE_X, F_BASE_Y, F_PRED_LEN, F_LOCK_ANGLE, F_LOCK_SLIDE = 0, 1, 2, 3, 4, 5
 F_MASS, F_INERTIA, F_COM_P, F_COM_Q = 6, 7, 8, 9
-N_LFLT = 10
+F_DAMPING, F_ARMATURE = 10, 11
+F_LOAD_FX, F_LOAD_FY, F_LOAD_A, F_LOAD_B, F_LOAD_TZ = 12, 13, 14, 15, 16
+N_LFLT = 17
 # entries of par
-P_METHOD, P_ALPHA, P_BETA, P_RCOND, P_GX, P_GY = 0, 1, 2, 3, 4, 5
-N_PAR = 6
+P_METHOD, P_ALPHA, P_BETA, P_RCOND, P_GX, P_GY, P_PLANT = 0, 1, 2, 3, 4, 5, 6
+N_PAR = 7
 # columns of kin
 K_THETA, K_COS, K_SIN, K_OX, K_OY, K_OMEGA, K_VX, K_VY, K_AX, K_AY = range(10)
 K_PCOS, K_PSIN, K_SLIDE, K_POMEGA, K_SLIDE_RATE = range(10, 15)

@@ -14,7 +14,7 @@ dynamics read. Conventions follow docs/design.md section 1:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -78,6 +78,12 @@ class Joint:
         Initial slide ``B``, m (the locked value if revolute).
     velocity : float
         Initial rate of the active coordinate, rad/s or m/s.
+    damping : float
+        Viscous damping of the active coordinate, N m s/rad or N s/m: the joint's generalized
+        force is ``-damping * rate``.
+    armature : float
+        Reflected rotor inertia, kg m^2 or kg, added to the mass matrix's diagonal entry of the
+        coordinate (its kinetic energy ``armature * rate^2 / 2``).
     """
 
     name: str
@@ -85,6 +91,8 @@ class Joint:
     angle: float
     slide: float
     velocity: float = 0.0
+    damping: float = 0.0
+    armature: float = 0.0
 
     @property
     def position(self) -> float:
@@ -192,6 +200,32 @@ class Actuator:
 
 
 @dataclass(frozen=True)
+class Load:
+    """A constant external load on a link: a force fixed in the world frame at a point of the
+    link, and a torque about z.
+
+    Both are conservative (a constant force and a constant torque): their potential
+    ``-(F . P + torque * theta)`` is part of the potential energy.
+
+    Attributes
+    ----------
+    name : str
+        Unique load name.
+    point : PointRef
+        Where the force acts (a moving link; the ground carries no load).
+    force : tuple of float
+        ``(fx, fy)`` in the world frame, N.
+    torque : float
+        About z, N m.
+    """
+
+    name: str
+    point: PointRef
+    force: tuple[float, float] = (0.0, 0.0)
+    torque: float = 0.0
+
+
+@dataclass(frozen=True)
 class NamedPoint:
     """A point whose world position is reported (``x.<name>``, ``y.<name>``)."""
 
@@ -233,6 +267,7 @@ class Model:
     gravity: np.ndarray
     source_text: str = ""
     extras: dict = field(default_factory=dict)
+    loads: tuple[Load, ...] = ()
 
     # derived arrays (filled by build)
     n: int = 0
@@ -250,6 +285,8 @@ class Model:
     com: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     locked_angle: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     locked_slide: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    damping: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    armature: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
 
     @classmethod
     def build(
@@ -264,6 +301,7 @@ class Model:
         gravity: tuple[float, float] = (0.0, -9.81),
         source_text: str = "",
         extras: dict | None = None,
+        loads: tuple[Load, ...] = (),
     ) -> Model:
         """Assemble a model and derive its index arrays.
 
@@ -279,6 +317,8 @@ class Model:
             The scene text the model was read from (kept for log attachments).
         extras : dict, optional
             Free-form scene metadata (description, provenance, defaults).
+        loads : sequence of Load
+            Constant external loads.
 
         Returns
         -------
@@ -295,6 +335,7 @@ class Model:
             gravity=np.asarray(gravity, dtype=float),
             source_text=source_text,
             extras=dict(extras or {}),
+            loads=tuple(loads),
         )
         n = len(links)
         if len(joints) != n:
@@ -331,7 +372,14 @@ class Model:
         model.com = np.array([lk.com for lk in links], dtype=float).reshape(n, 2)
         model.locked_angle = np.array([j.angle for j in joints], dtype=float)
         model.locked_slide = np.array([j.slide for j in joints], dtype=float)
+        model.damping = np.array([j.damping for j in joints], dtype=float)
+        model.armature = np.array([j.armature for j in joints], dtype=float)
         return model
+
+    @property
+    def has_plant_terms(self) -> bool:
+        """True when a joint has damping or armature, or the scene has loads."""
+        return bool(self.loads) or bool(np.any(self.damping)) or bool(np.any(self.armature))
 
     # ------------------------------------------------------------------ names and lookups
     @property
@@ -384,6 +432,15 @@ class Model:
             s[a.joint, k] = 1.0
         return s
 
+    def without_plant_terms(self) -> Model:
+        """This model without joint damping, armature and loads (itself when it has none)."""
+        if not self.has_plant_terms:
+            return self
+        joints = tuple(replace(j, damping=0.0, armature=0.0) for j in self.joints)
+        return Model.build(self.name, self.chains, self.links, joints, self.closures,
+                           self.actuators, self.points, tuple(self.gravity), self.source_text,
+                           self.extras)
+
     def with_state(self, q: np.ndarray, qd: np.ndarray) -> Model:
         """A copy whose initial joint values (and locked parameters) are ``q``, ``qd``.
 
@@ -392,9 +449,9 @@ class Model:
         joints = []
         for j, qi, vi in zip(self.joints, q, qd, strict=True):
             if j.kind == REVOLUTE:
-                joints.append(Joint(j.name, j.kind, float(qi), j.slide, float(vi)))
+                joints.append(replace(j, angle=float(qi), velocity=float(vi)))
             else:
-                joints.append(Joint(j.name, j.kind, j.angle, float(qi), float(vi)))
+                joints.append(replace(j, slide=float(qi), velocity=float(vi)))
         return Model.build(
             self.name,
             self.chains,
@@ -406,4 +463,5 @@ class Model:
             tuple(self.gravity),
             self.source_text,
             self.extras,
+            self.loads,
         )

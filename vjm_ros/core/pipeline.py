@@ -155,6 +155,10 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
         for i in range(r):
             rate = crow[i, layout.R_RATE]
             dissipation += gains[i, 1] * (rate * rate)
+    if par[layout.P_PLANT] != 0.0:
+        lflt = model[1]
+        for j in range(n):  # viscous joint damping, c qd^2
+            dissipation += lflt[j, layout.F_DAMPING] * (qd[j] * qd[j])
     kinetic = kin[n, layout.K_PCOS]
     potential = kin[n, layout.K_PSIN]
     spring = kin[n, layout.K_SLIDE]

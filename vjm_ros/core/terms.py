@@ -27,12 +27,19 @@ from vjm_ros.core.layout import (
     C_VY,
     C_X,
     C_Y,
+    F_ARMATURE,
     F_BASE_ANGLE,
     F_BASE_X,
     F_BASE_Y,
     F_COM_P,
     F_COM_Q,
+    F_DAMPING,
     F_INERTIA,
+    F_LOAD_A,
+    F_LOAD_B,
+    F_LOAD_FX,
+    F_LOAD_FY,
+    F_LOAD_TZ,
     F_LOCK_ANGLE,
     F_LOCK_SLIDE,
     F_MASS,
@@ -60,6 +67,7 @@ from vjm_ros.core.layout import (
     N_KIN,
     P_GX,
     P_GY,
+    P_PLANT,
     R_BIAS,
     R_DX,
     R_DY,
@@ -133,6 +141,51 @@ def _com_column(lint, kin, k, cx, cy):
     if lint[k, L_REV] == 1:
         return -(cy - kin[k, K_OY]), cx - kin[k, K_OX]
     return -kin[k, K_PSIN], kin[k, K_PCOS]
+
+
+@_jit(allocates=False)
+def plant_terms(qd, lint, lflt, kin, mm, bias):
+    """Add the joints' armature to ``M``'s diagonal, their viscous damping to ``b``
+    (``b += c qd``) and the generalized forces of the links' loads to ``b`` (``b -= Q``).
+
+    The loads of link ``i`` act as the world force ``F`` at its origin ``O_i`` and the moment
+    ``M_i = A cos(theta_i) + B sin(theta_i) + Tz`` (layout of ``lflt``): on a revolute
+    coordinate ``k`` of the same chain, ``Q_k = (O_i - O_k) x F + M_i``; on a prismatic one,
+    ``Q_k = n(theta_pred_k) . F``.
+    """
+    n = qd.shape[0]
+    for k in range(n):
+        mm[k, k] += lflt[k, F_ARMATURE]
+        bias[k] += lflt[k, F_DAMPING] * qd[k]
+    for i in range(n):
+        fx = lflt[i, F_LOAD_FX]
+        fy = lflt[i, F_LOAD_FY]
+        moment = (lflt[i, F_LOAD_A] * kin[i, K_COS] + lflt[i, F_LOAD_B] * kin[i, K_SIN]
+                  + lflt[i, F_LOAD_TZ])
+        if fx == 0.0 and fy == 0.0 and moment == 0.0:
+            continue
+        for k in range(lint[i, L_START], i + 1):
+            if lint[k, L_REV] == 1:
+                dx = kin[i, K_OX] - kin[k, K_OX]
+                dy = kin[i, K_OY] - kin[k, K_OY]
+                bias[k] -= dx * fy - dy * fx + moment
+            else:
+                bias[k] -= -kin[k, K_PSIN] * fx + kin[k, K_PCOS] * fy
+
+
+@_jit(allocates=False)
+def load_potential(lflt, kin):
+    """Potential energy of the links' loads, ``-sum(F . P + Tz theta)``, J."""
+    potential = 0.0
+    for i in range(lflt.shape[0]):
+        fx = lflt[i, F_LOAD_FX]
+        fy = lflt[i, F_LOAD_FY]
+        c = kin[i, K_COS]
+        s = kin[i, K_SIN]
+        potential -= fx * kin[i, K_OX] + fy * kin[i, K_OY]
+        potential -= -lflt[i, F_LOAD_B] * c + lflt[i, F_LOAD_A] * s
+        potential -= lflt[i, F_LOAD_TZ] * kin[i, K_THETA]
+    return potential
 
 
 @_jit(allocates=False)
@@ -225,6 +278,8 @@ def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, 
                     if lint[k, L_REV] == 1 and lint[j, L_REV] == 1:
                         v += inertia
                     mm[k, j] += v
+        if par[P_PLANT] != 0.0:
+            plant_terms(qd, lint, lflt, kin, mm, bias)
         for k in range(n):
             for j in range(k + 1, n):
                 mm[k, j] = mm[j, k]

@@ -26,6 +26,7 @@ from vjm_ros.core.model import (
     Closure,
     Joint,
     Link,
+    Load,
     Model,
     NamedPoint,
     PointRef,
@@ -270,6 +271,7 @@ class SceneBuilder:
         actuators, dynamics = self.actuators(self.section(doc, "actuators"))
         sensors = self.sensors(doc.get("sensors"), joints)
         points = self.points(self.section(doc, "points"), chains, links)
+        loads = self.loads(self.section(doc, "loads"))
         gains = self.gains(self.section(doc, "closure_method"))
         defaults = self.defaults(self.section(doc, "defaults"))
         plant = self.plant(dynamics, sensors, defaults)
@@ -277,6 +279,7 @@ class SceneBuilder:
             name, tuple(chains), tuple(links), tuple(joints), tuple(closures), tuple(actuators),
             tuple(points), gravity, self.text,
             {"description": doc.get("description", ""), "provenance": doc.get("provenance", "")},
+            loads,
         )
         self.check_inertia(model)
         model, residual = self.close(model, doc.get("assemble"))
@@ -320,7 +323,8 @@ class SceneBuilder:
                 inertia = self.number(lk.get("inertia", 0.0), f"{lkey}.inertia", minimum=0.0)
                 com = self.vector(lk.get("com", [length / 2.0, 0.0]), f"{lkey}.com")
                 jkey = f"{lkey}.joint"
-                jt = self.mapping(jt, jkey, {"name", "type", "angle", "slide", "velocity"})
+                jt = self.mapping(jt, jkey, {"name", "type", "angle", "slide", "velocity",
+                                             "damping", "armature"})
                 jname = self.name(jt.get("name", f"{cname}_joint{i + 1}"), f"{jkey}.name")
                 if jname in joint_names:
                     raise self.fail(f"{jkey}.name", "a joint name used once in the scene", jname)
@@ -334,7 +338,10 @@ class SceneBuilder:
                     if kind == "revolute"
                     else self.number(rate_raw, f"{jkey}.velocity")
                 )
-                joints.append(Joint(jname, kind, absolute - prev_angle, slide, rate))
+                damping, armature = (self.number(jt.get(k, 0.0), f"{jkey}.{k}", minimum=0.0)
+                                     for k in ("damping", "armature"))
+                joints.append(Joint(jname, kind, absolute - prev_angle, slide, rate, damping,
+                                    armature))
                 links.append(Link(lname, c, length, mass, inertia, com))
                 self.link_key.append(lkey)
                 idx.append(len(links) - 1)
@@ -525,6 +532,25 @@ class SceneBuilder:
             ref = self.point({k2: v for k2, v in pt.items() if k2 != "name"}, key)
             out.append(NamedPoint(pname, ref))
         return out
+
+    def loads(self, value) -> tuple[Load, ...]:
+        """The ``loads`` section: constant forces (world frame, N) and torques (N m) on links."""
+        out, names = [], set()
+        for k, item in enumerate(self.sequence(value, "loads", max_len=MAX_CLOSURES)):
+            key = f"loads[{k}]"
+            item = self.mapping(item, key, {"name", "point", "force", "torque"})
+            lname = self.name(self.require(item, "name", key), f"{key}.name")
+            if lname in names:
+                raise self.fail(f"{key}.name", "a load name used once", lname)
+            names.add(lname)
+            ref = self.point(self.require(item, "point", key), f"{key}.point")
+            if ref.link < 0:
+                raise self.fail(f"{key}.point", "a point on a moving link (the ground takes no "
+                                "load)", item["point"])
+            force = self.vector(item.get("force", [0.0, 0.0]), f"{key}.force")
+            out.append(Load(lname, ref, force, self.number(item.get("torque", 0.0),
+                                                           f"{key}.torque")))
+        return tuple(out)
 
     def gains(self, value) -> dict:
         """The ``closure_method`` section."""

@@ -23,6 +23,6 @@ TOP_KEY = "(top level)"
 
 TOP_KEYS = {
     "name", "description", "provenance", "units", "gravity", "chains", "closures", "actuators",
-    "points", "closure_method", "assemble", "defaults", "sensors",
+    "points", "loads", "closure_method", "assemble", "defaults", "sensors",
 }
 
