@@ -262,3 +262,17 @@ def test_refuses_a_link_named_like_the_root():
         scene_urdf(parse_scene(text).model)
     with pytest.raises(ValueError, match="zero pose"):
         scene_urdf(load_scene("four_bar").model, zero="home")
+
+
+def test_effort_bounds_are_the_joints(tmp_path):
+    """With a gear of 3 the joint's effort bound is 3 x the command's limit (URDF efforts are
+    joint efforts), in ``<limit effort>`` and in the ros2_control command interface."""
+    path = tmp_path / "geared.yaml"
+    path.write_text(Path(KINDS).read_text().replace(
+        "{joint: crank_joint, limit: 20.0}", "{joint: crank_joint, limit: 20.0, gear: 3.0}"))
+    scene = load_scene(str(path))
+    root = ET.fromstring(scene_urdf(scene.model, plant=scene.plant))
+    assert float(root.find("joint[@name='crank_joint']/limit").get("effort")) == 60.0
+    assert float(root.find("joint[@name='lever_joint']/limit").get("effort")) == 0.0
+    cmd = root.find("ros2_control/joint[@name='crank_joint']/command_interface")
+    assert [float(p.text) for p in cmd.findall("param")] == [-60.0, 60.0]

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
                                      "given with --urdf")
         from vjm_ros.formats.urdf_out import scene_urdf
 
-        text, target = _written(lambda: scene_urdf(scene.model, zero=args.zero)), args.urdf
+        text, target = _written(lambda: scene_urdf(scene.model, args.zero, scene.plant)), args.urdf
     else:
         if args.zero != "coordinates":
             raise ConfigurationError(f"--zero {args.zero}: a URDF option, given with --mjcf "
@@ -93,7 +93,7 @@ def _mjcf(scene, args) -> str:
     integrator = args.integrator or MUJOCO_INTEGRATORS.get(d.get("integrator", "rk4"), "RK4")
     solref = tuple(args.solref) if args.solref else DEFAULT_SOLREF
     return scene_mjcf(scene.model, MjcfSettings(timestep=timestep, integrator=integrator,
-                                                solref=solref))
+                                                solref=solref), scene.plant)
 
 
 def _write(text: str, target: str) -> None:

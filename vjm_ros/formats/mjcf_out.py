@@ -25,7 +25,11 @@ gravity are the scene's (docs/design.md section 1):
 * ``angle`` closure (relative angle fixed, translation free): a carriage (the same mass) on two
   ``slide`` joints ``<closure>_x``, ``<closure>_y`` along the reference's axes and a
   ``<weld>`` of the link to it;
-* each actuator a ``<motor>`` on its joint, ``ctrlrange`` its limit (none when unlimited);
+* each actuator a ``<motor>`` on its joint, ``gear`` its gear (joint effort = gear x control),
+  ``ctrlrange`` its limit (none when unlimited); an actuator with a lag is a ``<general>``
+  actuator with ``dyntype="filterexact"`` and ``dynprm`` its time constant, one with a delay
+  has MuJoCo's ``delay`` (plus a quarter step: MuJoCo's force over the step from ``t`` takes
+  the control of about ``t + h - delay``) and the ``nsample`` history it needs;
 * a keyframe ``initial`` with the initial ``qpos`` and ``qvel`` (carriage rates included):
   ``mj_resetDataKeyframe(m, d, 0)`` starts the scene;
 * sites at every link end (``end_<link>``), named point (``pt_<point>``) and both sides of
@@ -43,6 +47,7 @@ import numpy as np
 from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import ANGLE, GROUND, HINGE, REVOLUTE, SLIDER, Model
 from vjm_ros.formats.urdf_out import number, numbers
+from vjm_ros.scene.plant import ActuatorDynamics, Plant
 
 DEFAULT_SOLREF = (0.02, 1.0)
 """MuJoCo's default ``solref``: time constant 0.02 s, damping ratio 1."""
@@ -124,7 +129,8 @@ def stiffen_carriages(mj_model, model: Model) -> None:
         mj_model.body_invweight0[carriage] = mj_model.body_invweight0[link]
 
 
-def scene_mjcf(model: Model, settings: MjcfSettings | None = None) -> str:
+def scene_mjcf(model: Model, settings: MjcfSettings | None = None,
+               plant: Plant | None = None) -> str:
     """MJCF text of a scene model.
 
     Parameters
@@ -132,6 +138,8 @@ def scene_mjcf(model: Model, settings: MjcfSettings | None = None) -> str:
     model : Model
         Any scene: revolute and prismatic joints, hinge, slider and angle closures.
     settings : MjcfSettings, optional
+    plant : Plant, optional
+        The scene's actuator dynamics (``Scene.plant``): gears, lags and delays.
 
     Returns
     -------
@@ -186,10 +194,10 @@ def scene_mjcf(model: Model, settings: MjcfSettings | None = None) -> str:
         lines.append("  </equality>")
     if model.actuators:
         lines.append("  <actuator>")
-        for a in model.actuators:
-            jn = model.joints[a.joint].name
-            limit = f' ctrlrange="{numbers(-a.limit, a.limit)}"' if math.isfinite(a.limit) else ""
-            lines.append(f'    <motor name="{jn}" joint="{jn}" gear="1"{limit}/>')
+        dynamics = (plant.actuators if plant is not None else ()) or (
+            (ActuatorDynamics(),) * len(model.actuators))
+        for a, dyn in zip(model.actuators, dynamics, strict=True):
+            lines.append("    " + _actuator(model.joints[a.joint].name, a.limit, dyn, s.timestep))
         lines.append("  </actuator>")
     lines += [
         "  <keyframe>",
@@ -199,6 +207,23 @@ def scene_mjcf(model: Model, settings: MjcfSettings | None = None) -> str:
         "</mujoco>",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _actuator(joint: str, limit: float, dyn: ActuatorDynamics, timestep: float) -> str:
+    """A ``motor`` (or a ``general`` actuator with a ``filter`` for a lag) on ``joint``: force =
+    gear x control, the control bounded by the scene's limit, delayed by ``delay``."""
+    attrs = f'name="{joint}" joint="{joint}" gear="{number(dyn.gear)}"'
+    if math.isfinite(limit):
+        attrs += f' ctrlrange="{numbers(-limit, limit)}"'
+    if dyn.delay > 0.0:
+        # MuJoCo's force in the step from t takes the control of about t + h - delay: a quarter
+        # step more starts the effort ``delay`` after the command, as in vjm, clear of rounding
+        delay = dyn.delay + timestep / 4
+        attrs += f' delay="{number(delay)}" nsample="{int(math.ceil(delay / timestep)) + 2}"'
+    if dyn.time_constant > 0.0:
+        return (f'<general {attrs} dyntype="filterexact" dynprm="{number(dyn.time_constant)}" '
+                f'gainprm="1" biastype="none"/>')
+    return f"<motor {attrs}/>"
 
 
 def _extra_names(closure) -> list[str]:

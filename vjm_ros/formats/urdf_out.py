@@ -49,7 +49,9 @@ Closures (``<gazebo>``):
 Actuators and the initial state are in a ``<ros2_control>`` element: every joint has
 ``position`` and ``velocity`` state interfaces whose ``initial_value`` is the scene's initial
 state (in the file's joint positions), and every actuated joint an ``effort`` command interface
-with ``min``/``max`` its limit.
+with ``min``/``max`` its largest joint effort (gear times the command's limit), which is also the
+joint's ``<limit effort>`` (0 on a passive joint). An actuator's lag and delay have no URDF
+element and are not written.
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ import numpy as np
 
 from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import ANGLE, GROUND, HINGE, REVOLUTE, SLIDER, Model
+from vjm_ros.scene.plant import Plant
 
 ROOT_LINK = "world"
 """Name of the root link (the ground), the node's marker frame."""
@@ -86,7 +89,7 @@ def numbers(*xs: float) -> str:
     return " ".join(number(x) for x in xs)
 
 
-def scene_urdf(model: Model, zero: str = "coordinates") -> str:
+def scene_urdf(model: Model, zero: str = "coordinates", plant: Plant | None = None) -> str:
     """URDF text of a scene model.
 
     Parameters
@@ -97,6 +100,9 @@ def scene_urdf(model: Model, zero: str = "coordinates") -> str:
         ``"coordinates"``: URDF positions are the scene's joint coordinates (what the node's
         ``joint_states`` and ``robot_description`` use). ``"initial"``: the zero pose is the
         scene's initial state (for Gazebo), positions are ``q - q0``.
+    plant : Plant, optional
+        The scene's actuator dynamics (``Scene.plant``): effort bounds are the joint's, gear
+        times the command's limit (lags and delays have no URDF element).
 
     Returns
     -------
@@ -123,10 +129,11 @@ def scene_urdf(model: Model, zero: str = "coordinates") -> str:
     robot.append(_material("link", "0.2 0.4 0.8 1"))
     robot.append(_material("ground", "0.4 0.4 0.4 1"))
     robot.append(_root_link(model, size))
+    efforts = _effort_limits(model, plant)
     for i in range(model.n):
         robot.append(_link(model, i, size))
-        robot.append(_joint(model, i, float(offset[i])))
-    robot.append(_ros2_control(model, q0 - offset))
+        robot.append(_joint(model, i, float(offset[i]), efforts[i]))
+    robot.append(_ros2_control(model, q0 - offset, efforts))
     if model.closures:
         robot.append(_gazebo(model, offset))
     ET.indent(robot, space="  ")
@@ -283,7 +290,7 @@ def joint_origin(model: Model, i: int, offset: float = 0.0) -> tuple[np.ndarray,
     return xyz, yaw, axis
 
 
-def _joint(model: Model, i: int, offset: float) -> ET.Element:
+def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     joint = model.joints[i]
     kind = "continuous" if joint.kind == REVOLUTE else "prismatic"
     el = ET.Element("joint", name=joint.name, type=kind)
@@ -292,36 +299,37 @@ def _joint(model: Model, i: int, offset: float) -> ET.Element:
     xyz, yaw, axis = joint_origin(model, i, offset)
     _origin(el, xyz, yaw)
     ET.SubElement(el, "axis", xyz=numbers(*axis))
-    limit = _effort_limit(model, i)
-    attrs = {"effort": number(limit), "velocity": number(UNBOUNDED)}
+    attrs = {"effort": number(effort), "velocity": number(UNBOUNDED)}
     if kind == "prismatic":
         attrs = {"lower": number(-UNBOUNDED), "upper": number(UNBOUNDED), **attrs}
     ET.SubElement(el, "limit", **attrs)
     return el
 
 
-def _effort_limit(model: Model, i: int) -> float:
-    """The actuator limit of joint ``i`` (N m or N), 0 for a passive joint."""
-    for a in model.actuators:
-        if a.joint == i:
-            return float(a.limit) if math.isfinite(a.limit) else UNBOUNDED
-    return 0.0
+def _effort_limits(model: Model, plant: Plant | None) -> np.ndarray:
+    """Largest joint effort of each joint (N m or N): gear x limit where an actuator drives it
+    (:data:`UNBOUNDED` for an unlimited one), 0 for a passive joint."""
+    out = np.zeros(model.n)
+    gears = [d.gear for d in plant.actuators] if plant is not None and plant.actuators else (
+        [1.0] * len(model.actuators))
+    for a, gear in zip(model.actuators, gears, strict=True):
+        out[a.joint] = abs(gear) * a.limit if math.isfinite(a.limit) else UNBOUNDED
+    return out
 
 
-def _ros2_control(model: Model, initial: np.ndarray) -> ET.Element:
+def _ros2_control(model: Model, initial: np.ndarray, efforts: np.ndarray) -> ET.Element:
     """Effort command interfaces of the actuated joints; every joint's initial state."""
     _, qd0 = model.initial_state()
     el = ET.Element("ros2_control", name=model.name, type="system")
     hw = ET.SubElement(el, "hardware")
     ET.SubElement(hw, "plugin").text = "gz_ros2_control/GazeboSimSystem"
-    actuated = {a.joint: a for a in model.actuators}
+    actuated = {a.joint for a in model.actuators}
     for i, joint in enumerate(model.joints):
         j = ET.SubElement(el, "joint", name=joint.name)
         if i in actuated:
             c = ET.SubElement(j, "command_interface", name="effort")
-            limit = _effort_limit(model, i)
-            ET.SubElement(c, "param", name="min").text = number(-limit)
-            ET.SubElement(c, "param", name="max").text = number(limit)
+            ET.SubElement(c, "param", name="min").text = number(-efforts[i])
+            ET.SubElement(c, "param", name="max").text = number(efforts[i])
         for name, value in (("position", initial[i]), ("velocity", qd0[i])):
             s = ET.SubElement(j, "state_interface", name=name)
             ET.SubElement(s, "param", name="initial_value").text = number(value)

@@ -351,7 +351,7 @@ class SimNode(Node):
         """``~/scene_description``: the scene YAML with its assembled initial state, and
         ``robot_description``: its URDF, joint positions = joint coordinates (both latched)."""
         self._scene_pub.publish(String(data=assembled_scene_yaml(self.scene)))
-        self._description_pub.publish(String(data=scene_urdf(self.scene.model)))
+        self._description_pub.publish(String(data=scene_urdf(self.scene.model, plant=self.scene.plant)))
 
     def clock(self, t: float) -> None:
         """Publish ``/clock`` (opening its publisher when ``publish_clock`` was turned on)."""

@@ -36,6 +36,7 @@ from vjm_ros.formats.mjcf_out import (  # noqa: F401 (the defaults are part of t
     scene_mjcf,
     stiffen_carriages,
 )
+from vjm_ros.scene.plant import Plant
 
 MUJOCO_REQUIREMENT = "mujoco>=3.2,!=4.0.0"
 """Requirement string of the ``compare`` extra."""
@@ -109,13 +110,16 @@ class MujocoSettings:
         return 1.0 / (self.rate * self.substeps)
 
 
-def model_to_mjcf(model: Model, settings: MujocoSettings | None = None) -> str:
+def model_to_mjcf(model: Model, settings: MujocoSettings | None = None,
+                  plant: Plant | None = None) -> str:
     """MJCF text of a scene model at the bench's settings (:func:`scene_mjcf`).
 
     Parameters
     ----------
     model : Model
     settings : MujocoSettings, optional
+    plant : Plant, optional
+        The scene's actuator dynamics (gears, lags, delays).
 
     Returns
     -------
@@ -125,7 +129,7 @@ def model_to_mjcf(model: Model, settings: MujocoSettings | None = None) -> str:
     return scene_mjcf(model, MjcfSettings(timestep=s.timestep, integrator=s.integrator,
                                           solref=tuple(s.solref), solimp=tuple(s.solimp),
                                           inertia_epsilon=s.inertia_epsilon,
-                                          carriage_mass=s.inertia_epsilon))
+                                          carriage_mass=s.inertia_epsilon), plant)
 
 
 class MujocoSimulator:
@@ -135,6 +139,8 @@ class MujocoSimulator:
     ----------
     model : Model
     settings : MujocoSettings
+    plant : Plant, optional
+        The scene's actuator dynamics (default: unit gears, no lag or delay).
 
     Raises
     ------
@@ -142,14 +148,15 @@ class MujocoSimulator:
         When MuJoCo is not installed.
     """
 
-    def __init__(self, model: Model, settings: MujocoSettings | None = None):
+    def __init__(self, model: Model, settings: MujocoSettings | None = None,
+                 plant: Plant | None = None):
         mj = import_mujoco()
         if mj is None:
             raise ImportError("MuJoCo is not installed (pip install '.[compare]')")
         self.mj = mj
         self.model = model
         self.settings = settings or MujocoSettings()
-        self.xml = model_to_mjcf(model, self.settings)
+        self.xml = model_to_mjcf(model, self.settings, plant)
         self.m = mj.MjModel.from_xml_string(self.xml)
         stiffen_carriages(self.m, model)
         self.d = mj.MjData(self.m)
