@@ -49,6 +49,9 @@ class Body:
         Named points (sites, frames), world frame, m.
     element : str
         Where the body is written, for messages.
+    turn : ndarray, shape (3, 3)
+        The body's rotation from the zero pose to the pose at which the file's constraints are
+        defined (identity but for MJCF, whose equalities hold at ``qpos0``).
     """
 
     name: str
@@ -58,6 +61,7 @@ class Body:
     origin: np.ndarray
     points: dict = field(default_factory=dict)
     element: str = ""
+    turn: np.ndarray = field(default_factory=lambda: np.eye(3))
 
 
 @dataclass
@@ -84,6 +88,8 @@ class GraphJoint:
         :data:`TREE`, :data:`GRAPH`, :data:`LOOP` or :data:`CONSTRAINT`.
     start : float
         Joint position at the start, rad or m.
+    velocity : float
+        Joint rate at the start, rad/s or m/s.
     element : str
         Where the joint is written, for messages.
     """
@@ -98,6 +104,7 @@ class GraphJoint:
     role: str
     start: float = 0.0
     element: str = ""
+    velocity: float = 0.0
 
 
 @dataclass

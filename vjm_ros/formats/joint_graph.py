@@ -25,12 +25,12 @@ import re
 import numpy as np
 
 from vjm_ros.core.errors import SceneError
+from vjm_ros.formats.carriages import ALIGN, SLIDE, collapse_carriages
 from vjm_ros.formats.graph import (
     CONNECT,
     CONSTRAINT,
     FIXED,
     GRAPH,
-    LOOP,
     PRISMATIC,
     REVOLUTE,
     TREE,
@@ -66,7 +66,7 @@ class _Reducer:
     def plane(self) -> None:
         g = self.g
         revolute = [j for j in g.joints if j.kind == REVOLUTE]
-        prismatic = [j for j in g.joints if j.kind == PRISMATIC]
+        prismatic = [j for j in g.joints if j.kind in (PRISMATIC, SLIDE)]
         if revolute:
             chain_like = [j for j in revolute if j.role != CONSTRAINT] or revolute
             ref = chain_like[0].axis
@@ -200,7 +200,11 @@ class _Reducer:
         moves: dict[str, list] = {k: [] for k in [WORLD, *self.links]}
         for order, j in enumerate(self.edges):
             a, b = self.group_of[j.parent], self.group_of[j.child]
-            rank = (j.name not in self.actuated, {TREE: 0, GRAPH: 0, LOOP: 1}.get(j.role, 2))
+            # a tree's joints first; in a joint graph (SDFormat) the actuated ones, then the
+            # ones written first, so that the joints written last close the loops
+            rank = ((0, 0, 0) if j.role == TREE else
+                    (0, j.name not in self.actuated, order) if j.role == GRAPH else
+                    (1, j.name not in self.actuated, 0))
             for src, dst, forward in ((a, b, True), (b, a, False)):
                 if self.may_walk(j, forward):
                     moves[src].append(((*rank, not forward, order), dst, j, forward))
@@ -262,9 +266,8 @@ class _Reducer:
         if end is not None:
             options += [(m, False) for m in self.moves[end] if m[1] not in covered]
         options += [(m, True) for m in self.moves[WORLD] if m[1] not in covered]
-        # the best-ranked joint first (actuated, of the tree, walked forward), then the one
-        # written first: among equals, the joints written last close the loops
-        options.sort(key=lambda o: (o[0][0], o[1]))
+        # by rank; among equals a chain goes on before another starts (a tree is followed)
+        options.sort(key=lambda o: (o[0][0][:3], o[1], o[0][0][3:]))
         for (_, dst, j, forward), new_chain in options:
             if new_chain:
                 chains.append([])
@@ -436,11 +439,13 @@ class _Reducer:
                 slide = j.start
             self.theta[link] = theta
             mass, com, inertia = self.props[link]
+            joint = {"name": self.names[j.name], "type": j.kind, "angle": _num(theta),
+                     "slide": _num(slide)}
+            if j.velocity:
+                joint["velocity"] = _num(j.velocity)
             links.append({
                 "name": scene_name(link), "length": _num(length), "mass": _num(mass),
-                "inertia": _num(inertia), "com": self.local(link, com),
-                "joint": {"name": self.names[j.name], "type": j.kind, "angle": _num(theta),
-                          "slide": _num(slide)},
+                "inertia": _num(inertia), "com": self.local(link, com), "joint": joint,
             })
             psi_prev, o_prev, a_prev = psi, o, length
         return {"name": f"chain{c + 1}", "origin": [_num(x) for x in ground_origin],
@@ -464,7 +469,7 @@ class _Reducer:
             if j.kind in (REVOLUTE, CONNECT, FIXED):
                 out.append({"name": name, "type": "hinge", "point": self.end(pb, qb),
                             "target": self.end(pa, qa)})
-            else:
+            elif j.kind in (PRISMATIC, SLIDE):
                 line = self.end(pa, qa)
                 d = self.flat(j.axis)
                 d = d / np.linalg.norm(d)
@@ -476,12 +481,21 @@ class _Reducer:
                 line["direction"] = [_num(x) for x in d]
                 out.append({"name": name, "type": "slider", "point": self.end(pb, qb),
                             "line": line})
-            if j.kind in (PRISMATIC, FIXED):
+            if j.kind in (PRISMATIC, FIXED, ALIGN):
                 la, lb = self.group_of[pb], self.group_of[pa]
                 target = {"ground": True} if lb == WORLD else {"link": scene_name(lb)}
-                out.append({"name": f"{name}_angle", "type": "angle", "link": scene_name(la),
-                            "target": target, "offset": _num(self.theta[la] - self.theta[lb])})
+                offset = self.constraint_angle(la) - self.constraint_angle(lb)
+                out.append({"name": name if j.kind == ALIGN else f"{name}_angle",
+                            "type": "angle", "link": scene_name(la), "target": target,
+                            "offset": _num(offset)})
         return out
+
+    def constraint_angle(self, link: str) -> float:
+        """The scene angle of ``link`` at the pose where the file's constraints hold, rad."""
+        if link == WORLD:
+            return 0.0
+        turn = self.g.bodies[link].turn @ self.e1
+        return self.frame[link][1] + math.atan2(float(turn @ self.e2), float(turn @ self.e1))
 
     def actuators(self) -> list:
         chain_joints = {j.name for ch in self.chain_list for j, _, _ in ch}
@@ -562,7 +576,7 @@ def reduce_graph(graph: JointGraph, actuate: tuple[str, ...] = ()) -> dict:
     SceneError
         Naming the file and the element the planar model cannot represent.
     """
-    reducer = _Reducer(graph, tuple(actuate))
+    reducer = _Reducer(collapse_carriages(graph), tuple(actuate))
     reducer.extra = tuple(actuate)
     return reducer.document()
 

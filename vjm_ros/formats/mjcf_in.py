@@ -4,10 +4,11 @@ The file goes through MuJoCo's own compiler (:class:`mujoco.MjModel`), so masses
 and inertias are those MuJoCo computes from the geoms (or the ``<inertial>`` elements), defaults
 and includes applied. Then:
 
-* hinge and slide joints are the joints; a body without joints is fixed to its parent; ball
-  and free joints are refused;
+* hinge and slide joints are the joints (several in one body: a massless link between each
+  two); a body without joints is fixed to its parent; ball and free joints are refused;
 * the coordinate of a joint is MuJoCo's ``qpos``: the link frames are placed at ``qpos = 0`` and
-  the scene starts at ``qpos0`` (the pose the file writes, shifted by each joint's ``ref``);
+  the scene starts at the first keyframe (``qpos``, ``qvel``) or, without one, at ``qpos0`` (the
+  pose the file writes, shifted by each joint's ``ref``) at rest;
 * ``<equality>``: ``connect`` (``body1`` + ``anchor``, or ``site1``/``site2``) keeps two points
   together, ``weld`` (with the relative pose at ``qpos0``) also keeps the relative angle;
   inactive equalities are left out; ``joint``, ``tendon`` and ``flex`` equalities are refused;
@@ -94,15 +95,19 @@ class _MjcfReader:
                                 "free" if kind == int(mj.mjtJoint.mjJNT_FREE) else "ball")
         zero = self.kinematics(np.zeros(m.nq))      # the frames of the scene
         start = self.kinematics(m.qpos0.copy())     # the pose the file writes
+        self.qpos_start, self.qvel_start = m.qpos0.copy(), np.zeros(m.nv)
+        if m.nkey:  # the first keyframe, when there is one, is the start
+            self.qpos_start, self.qvel_start = m.key_qpos[0].copy(), m.key_qvel[0].copy()
         self.zero, self.start = zero, start
         bodies = {}
         for b in range(1, m.nbody):
             name = self.body_name(b)
             rot = zero.ximat[b].reshape(3, 3)
             tensor = rot @ np.diag(m.body_inertia[b]) @ rot.T
+            turn = start.xmat[b].reshape(3, 3) @ zero.xmat[b].reshape(3, 3).T
             bodies[name] = Body(name=name, mass=float(m.body_mass[b]),
                                 com=zero.xipos[b].copy(), inertia=tensor,
-                                origin=zero.xpos[b].copy(), element=f"body '{name}'")
+                                origin=zero.xpos[b].copy(), element=f"body '{name}'", turn=turn)
         for s in range(m.nsite):
             b = int(m.site_bodyid[s])
             if b != 0:
@@ -118,11 +123,19 @@ class _MjcfReader:
                                          self.body_name(b), p, p.copy(),
                                          np.array([0.0, 0.0, 1.0]), TREE))
                 continue
-            if num > 1:
-                raise self.fail(f"body '{self.body_name(b)}'", "one joint per body (a body with "
-                                "several joints is several links in the planar model)",
-                                f"{num} joints")
-            joints.append(self.joint(adr, parent, self.body_name(b)))
+            # several joints in one body: a massless link between each two of them
+            for k in range(num - 1):
+                name = f"{self.body_name(b)}_{self.obj_name(mj.mjtObj.mjOBJ_JOINT, adr + k)}"
+                if name in bodies:
+                    raise self.fail(f"body '{self.body_name(b)}'", "joint names that do not "
+                                    "clash with body names", name)
+                bodies[name] = Body(name=name, mass=0.0, com=zero.xpos[b].copy(),
+                                    inertia=np.zeros((3, 3)), origin=zero.xpos[b].copy(),
+                                    element=f"body '{self.body_name(b)}'",
+                                    turn=bodies[self.body_name(b)].turn)
+                joints.append(self.joint(adr + k, parent, name))
+                parent = name
+            joints.append(self.joint(adr + num - 1, parent, self.body_name(b)))
         joints += self.equalities()
         ignored = ["collision and visual geometry (contacts)", "solver settings"]
         if np.any(m.dof_damping) or np.any(m.dof_armature) or np.any(m.dof_frictionloss):
@@ -139,7 +152,9 @@ class _MjcfReader:
         axis = self.zero.xaxis[i].copy()
         return GraphJoint(name=name, kind=kind, parent=parent, child=child, point=p,
                           child_point=p.copy(), axis=axis / np.linalg.norm(axis), role=TREE,
-                          start=float(m.qpos0[m.jnt_qposadr[i]]), element=f"joint '{name}'")
+                          start=float(self.qpos_start[m.jnt_qposadr[i]]),
+                          velocity=float(self.qvel_start[m.jnt_dofadr[i]]),
+                          element=f"joint '{name}'")
 
     def to_zero(self, b: int, p_start: np.ndarray) -> np.ndarray:
         """A point of body ``b`` given at the start pose, where it is at the zero pose, (3,)."""

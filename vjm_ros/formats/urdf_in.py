@@ -37,6 +37,7 @@ from vjm_ros.formats.graph import (
     GraphJoint,
     JointGraph,
     Pose,
+    inertia_tensor,
     numbers,
     parse_xml,
     rpy_matrix,
@@ -141,7 +142,12 @@ class _UrdfReader:
                 mass, com, tensor = 0.0, pose.position.copy(), np.zeros((3, 3))
             bodies[lk.name] = Body(name=lk.name, mass=mass, com=com, inertia=tensor,
                                    origin=pose.position.copy(), element=f"link '{lk.name}'")
+        for name, body in self.gazebo_links().items():
+            bodies[name] = body
         joints = [self.tree_joint(j) for j in self.robot.joints]
+        start = self.initial_values()
+        for j in joints:
+            j.start, j.velocity = start.get(j.name, (0.0, 0.0))
         joints += self.gazebo_joints()
         joints += self.constraints()
         ignored = ["collision and visual geometry"]
@@ -171,6 +177,36 @@ class _UrdfReader:
         if name not in self.frame:
             raise self.fail(where, "a link of the robot (or 'world')", name)
         return self.frame[name]
+
+    def gazebo_links(self) -> dict:
+        """SDFormat links inside ``<gazebo>`` (the carriages of loop joints), in the root
+        link's frame (their ``<pose>`` is in the model frame)."""
+        out = {}
+        for gz in self.root.findall("gazebo"):
+            for el in gz.findall("link"):
+                name = el.get("name", "")
+                where = f"<gazebo> link '{name}'"
+                if name in self.frame:
+                    raise self.fail(where, "a link name the robot does not use", name)
+                pose_el = el.find("pose")
+                frame = Pose.identity()
+                if pose_el is not None:
+                    v = numbers(pose_el.text, 6, self.path, f"{where} <pose>")
+                    frame = Pose(rpy_matrix(*v[3:]), np.array(v[:3]))
+                self.frame[name] = frame
+                inertial = el.find("inertial")
+                mass = float(numbers(inertial.findtext("mass") if inertial is not None else None,
+                                     1, self.path, f"{where} <mass>", default=[1.0])[0])
+                tensor = np.zeros((3, 3))
+                it = inertial.find("inertia") if inertial is not None else None
+                if it is not None:
+                    vals = [float(numbers(it.findtext(k), 1, self.path, f"{where} <{k}>",
+                                          default=[0.0])[0])
+                            for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")]
+                    tensor = frame.rotation @ inertia_tensor(*vals) @ frame.rotation.T
+                out[name] = Body(name=name, mass=mass, com=frame.position.copy(),
+                                 inertia=tensor, origin=frame.position.copy(), element=where)
+        return out
 
     def gazebo_joints(self) -> list:
         """Loop joints written as SDFormat joints in ``<gazebo>`` (no ``reference``)."""
@@ -236,6 +272,25 @@ class _UrdfReader:
                 name=name, kind=CONSTRAINT_KINDS[kind], parent=self.end(pl), child=self.end(cl),
                 point=pp.position.copy(), child_point=cp.position.copy(), axis=pa,
                 role=CONSTRAINT, element=where))
+        return out
+
+    def initial_values(self) -> dict:
+        """``{joint: (position, velocity)}`` from ``<ros2_control>`` state interfaces'
+        ``initial_value`` parameters (the start; 0 where none is given)."""
+        out = {}
+        for rc in self.root.findall("ros2_control"):
+            for jel in rc.findall("joint"):
+                values = [0.0, 0.0]
+                for k, kind in enumerate(("position", "velocity")):
+                    for si in jel.findall("state_interface"):
+                        if si.get("name") != kind:
+                            continue
+                        for param in si.findall("param"):
+                            if param.get("name") == "initial_value":
+                                where = (f"<ros2_control> joint '{jel.get('name', '')}' "
+                                         f"{kind} initial_value")
+                                values[k] = numbers(param.text, 1, self.path, where)[0]
+                out[jel.get("name", "")] = tuple(values)
         return out
 
     def actuators(self) -> list:
