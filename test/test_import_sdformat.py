@@ -127,3 +127,28 @@ def test_vjm_import_exits_2_naming_the_element_and_writes_yaml_otherwise(tmp_pat
     assert out.stderr.count("collision") == 1
     scene = load_scene(good)
     assert scene.model.actuator_names == ["crank_joint"]
+
+
+@pytest.mark.parametrize("version, axis_xml, expected", [
+    ("1.4", "<xyz>0 1 0</xyz>", [0, 1, 0]),  # 1.4: the model frame
+    ("1.5", "<xyz>0 1 0</xyz>", [0, -1, 0]),  # from 1.5: the joint frame (the child's, rolled)
+    ("1.6", "<xyz>0 1 0</xyz><use_parent_model_frame>true</use_parent_model_frame>", [0, 1, 0]),
+    ("1.7", "<xyz>0 1 0</xyz>", [0, -1, 0]),
+    ("1.7", '<xyz expressed_in="__model__">0 1 0</xyz>', [0, 1, 0]),
+    ("1.11", '<xyz expressed_in="frame_b">0 1 0</xyz>', [0, 0, 1]),
+])
+def test_joint_axes_are_read_in_the_frame_of_the_files_version(tmp_path, version, axis_xml,
+                                                                 expected):
+    """The child link is rolled half a turn about x, so its frame's y is the model's -y;
+    ``frame_b`` (1.7+) is the model frame turned a quarter about x (its y is the model's z)."""
+    from vjm_ros.formats.sdformat import read_sdformat
+
+    frame = ('<frame name="frame_b"><pose>0 0 0 1.5707963267948966 0 0</pose></frame>'
+             if version in ("1.7", "1.11") else "")
+    path = tmp_path / "axis.sdf"
+    path.write_text(f'<sdf version="{version}"><model name="m">'
+                    '<link name="a"><pose>0 0 0 3.141592653589793 0 0</pose></link>'
+                    f'{frame}<joint name="j" type="revolute"><parent>world</parent>'
+                    f'<child>a</child><axis>{axis_xml}</axis></joint></model></sdf>')
+    (joint,) = read_sdformat(str(path)).joints
+    np.testing.assert_allclose(joint.axis, expected, atol=1e-15)
