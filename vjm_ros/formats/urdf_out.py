@@ -135,7 +135,7 @@ def scene_urdf(model: Model, zero: str = "coordinates", plant: Plant | None = No
         robot.append(_joint(model, i, float(offset[i]), efforts[i]))
     robot.append(_ros2_control(model, q0 - offset, efforts))
     if model.closures:
-        robot.append(_gazebo(model, offset))
+        robot.append(_gazebo(model, offset, zero))
     ET.indent(robot, space="  ")
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
 
@@ -367,10 +367,14 @@ def _carriage(parent: ET.Element, name: str, x: float, y: float, yaw: float) -> 
         ET.SubElement(inertia, key).text = number(CARRIAGE_MASS * 1e-3)
 
 
-def _gazebo(model: Model, offset: np.ndarray) -> ET.Element:
+def _gazebo(model: Model, offset: np.ndarray, zero: str) -> ET.Element:
     """The closures as SDFormat joints (and carriage links), at the URDF's zero pose."""
     el = ET.Element("gazebo")
     el.append(ET.Comment(" loop closures: SDFormat joints (poses in the child link frame) "))
+    if zero == "coordinates":
+        el.append(ET.Comment(
+            " Gazebo builds these joints at the pose it loads, this file's zero pose q = 0, where "
+            "the loops need not close: for Gazebo, export with vjm export --zero initial "))
     kin = forward_kinematics(model, offset)
 
     def name_of(link: int) -> str:
