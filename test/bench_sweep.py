@@ -14,7 +14,7 @@ import time
 import pytest
 
 from vjm_ros.studies.sweep.engine import Engine, run_sweep
-from vjm_ros.studies.sweep.run import reference_for, run_case
+from vjm_ros.studies.sweep.run import reference_for, run_case, scene_source
 from vjm_ros.studies.sweep.spec import parse_spec
 
 pytestmark = pytest.mark.bench
@@ -36,13 +36,14 @@ def test_two_workers_against_a_serial_loop(tmp_path):
     spec = parse_spec(SPEC_200, "bench200.yaml")
     cases = spec.cases()
     assert len(cases) == 200
-    warm = {s: reference_for(s, "{}", 0.05, 1000.0) for s in spec.scenes}
+    texts = {s: scene_source(s) for s in spec.scenes}
+    warm = {s: reference_for(*texts[s], "{}", 0.05, 1000.0) for s in spec.scenes}
     for c in cases[:4]:
-        run_case(c, warm[c.scene])  # compile and cache before timing
+        run_case(c, texts[c.scene], warm[c.scene])  # compile and cache before timing
     t0 = time.perf_counter()  # the same work as the sweep: one reference per scene, every run
-    refs = {s: reference_for(s, "{}", 0.5, 1000.0) for s in spec.scenes}
+    refs = {s: reference_for(*texts[s], "{}", 0.5, 1000.0) for s in spec.scenes}
     for c in cases:
-        run_case(c, refs[c.scene])
+        run_case(c, texts[c.scene], refs[c.scene])
     serial = time.perf_counter() - t0
     walls = {}
     for workers in (1, 2):

@@ -17,6 +17,25 @@ from vjm_ros.studies.sweep.spec import SweepSpec
 
 PLOTTABLE = tuple(m for m in MEASURES if m not in ("status", "message", "finite"))
 """Measures a figure can show."""
+UNITS = {"diverged_at": "s", "max_closure_error": "m or rad", "rms_closure_error": "m or rad",
+         "energy_drift": "1", "energy_balance_residual": "J", "position_deviation": "m",
+         "tip_deviation": "m", "wall_time": "s"}
+
+
+def readable_axis(axis, set_scale, values: list[float]) -> None:
+    """A log axis with at most a few labelled ticks, or a linear one where the values span less
+    than a decade (where log ticks would all be minor ones, their labels crowding) or are not
+    all positive."""
+    from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter
+
+    values = [v for v in values if math.isfinite(v)]
+    if not values or min(values) <= 0 or max(values) < 10 * min(values):
+        set_scale("linear")
+        axis.set_major_locator(MaxNLocator(5))
+        return
+    set_scale("log")
+    axis.set_major_locator(LogLocator(base=10, numticks=6))
+    axis.set_minor_formatter(NullFormatter())
 
 
 def summary_lines(result: dict) -> list[str]:
@@ -76,11 +95,10 @@ def plot_sweep(sweep, y: str, x: str, path: str | Path) -> Path:
     for value in dict.fromkeys(str(r.get(group)) for r in rows):
         mine = [r for r in rows if str(r.get(group)) == value]
         ax.scatter([r[x] for r in mine], [r[y] for r in mine], s=18, label=f"{group} {value}")
-    for axis, name in ((ax.set_xscale, x), (ax.set_yscale, y)):
-        if rows and all(r[name] > 0 for r in rows):
-            axis("log")
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    readable_axis(ax.xaxis, ax.set_xscale, [r[x] for r in rows])
+    readable_axis(ax.yaxis, ax.set_yscale, [r[y] for r in rows])
+    ax.set_xlabel(f"{x} ({UNITS[x]})")
+    ax.set_ylabel(f"{y} ({UNITS[y]})")
     ax.set_title(f"{sweep.spec.name}: {len(rows)} rows with both measures", fontsize=9)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     if rows:

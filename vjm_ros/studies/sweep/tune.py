@@ -28,6 +28,7 @@ import yaml
 
 from vjm_ros.scene import load_scene
 from vjm_ros.studies.sweep.spec import SweepSpec
+from vjm_ros.studies.sweep.summary import readable_axis
 
 OMEGA_N = tuple(float(w) for w in np.geomspace(10.0, 3000.0, 12).round(1))
 """Natural frequencies tried, rad/s (10 to 3000, log-spaced)."""
@@ -141,21 +142,6 @@ def plot_tuning(rows: list[dict], front: list[dict], chosen: dict | None, path: 
     return Path(path)
 
 
-def _readable_axis(axis, set_scale, values: list[float]) -> None:
-    """A log axis with at most a few labelled ticks, or a linear one where the values span less
-    than a decade (where log ticks would all be minor ones, their labels crowding)."""
-    from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter
-
-    values = [v for v in values if v and v > 0 and math.isfinite(v)]
-    if values and max(values) < 10 * min(values):
-        set_scale("linear")
-        axis.set_major_locator(MaxNLocator(5))
-        return
-    set_scale("log")
-    axis.set_major_locator(LogLocator(base=10, numticks=6))
-    axis.set_minor_formatter(NullFormatter())
-
-
 def tuning_figure(rows: list[dict], front: list[dict], chosen: dict | None, title: str):
     """The figure of :func:`plot_tuning` (a matplotlib Figure, Agg canvas)."""
     import matplotlib
@@ -179,8 +165,8 @@ def tuning_figure(rows: list[dict], front: list[dict], chosen: dict | None, titl
     refused = sum(1 for r in rows if str(r.get("status", "")).startswith("refused"))
     diverged = sum(1 for r in rows if r.get("status") == "diverged")
     costs = [r["wall_time"] / r["duration"] * 1e3 for r in ok]
-    _readable_axis(ax.xaxis, ax.set_xscale, costs)
-    _readable_axis(ax.yaxis, ax.set_yscale, [r["max_closure_error"] for r in ok])
+    readable_axis(ax.xaxis, ax.set_xscale, costs)
+    readable_axis(ax.yaxis, ax.set_yscale, [r["max_closure_error"] for r in ok])
     ax.set_xlabel("cost: wall time per simulated second (ms)")
     ax.set_ylabel("largest closure error (m)")
     edge_note = f"; chosen a factor {MARGIN:g} below the stability edge"
