@@ -140,6 +140,9 @@ def test_urdf_is_a_valid_tree(spec):
     (``validate``), one root, every joint's links declared, each link the child of one joint;
     and the scene's names, masses, mass centres and inertias."""
     model = load_scene(spec).model
+    for zero in ("coordinates", "initial"):
+        # well-formed XML for a strict parser (yourdfpy's lxml recovers from some errors)
+        ET.fromstring(scene_urdf(model, zero))
     robot = _load(scene_urdf(model))
     assert robot.validate(), robot.errors
     links = {lk.name for lk in robot.robot.links}

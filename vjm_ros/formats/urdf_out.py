@@ -374,7 +374,7 @@ def _gazebo(model: Model, offset: np.ndarray, zero: str) -> ET.Element:
     if zero == "coordinates":
         el.append(ET.Comment(
             " Gazebo builds these joints at the pose it loads, this file's zero pose q = 0, where "
-            "the loops need not close: for Gazebo, export with vjm export --zero initial "))
+            "the loops need not close: for Gazebo, export with zero pose initial (vjm export, option zero) "))
     kin = forward_kinematics(model, offset)
 
     def name_of(link: int) -> str:
