@@ -326,3 +326,17 @@ def test_a_figure_of_unknown_measures_is_refused_before_any_cluster(tmp_path, ca
     assert "--figure: expected two measures Y,X of status" not in line
     assert "--figure: expected two measures Y,X of diverged_at, max_closure_error" in line
     assert line.endswith("found 'max_closure_error,speed'")
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--integrator", "foo"], "--integrator: expected one of ['explicit_euler'"),
+    (["--rate", "-5"], "--rate: expected a positive number of Hz, found -5.0"),
+    (["--substeps", "0"], "--substeps: expected a whole number of steps per tick >= 1, found 0"),
+    (["--duration", "-1"], "--duration: expected a positive number of simulated seconds"),
+], ids=["integrator", "rate", "substeps", "duration"])
+def test_tune_refuses_bad_flags_before_any_cluster(tmp_path, capsys, flags, message):
+    out = tmp_path / "tune"
+    code = sweep_cli.main("tune", ["four_bar", *flags, "--out", str(out), "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists(), err
+    assert f"vjm tune: error: vjm tune four_bar: {message}" in err

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.studies.sweep.engine import CLUSTER_TIMEOUT, RESULTS_CSV, Engine, Sweep
-from vjm_ros.studies.sweep.spec import load_spec
+from vjm_ros.studies.sweep.spec import check_value, load_spec
 
 EXIT_ALL_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 1, 2, 130
 
@@ -145,6 +145,9 @@ def _tune(args) -> int:
         tuning_spec,
     )
 
+    for key in ("integrator", "rate", "substeps", "duration"):  # as a spec's values are
+        if getattr(args, key) is not None:
+            check_value(f"vjm tune {args.scene}", f"--{key}", key, getattr(args, key))
     spec = tuning_spec(args.scene, args.integrator, args.rate, args.substeps, args.duration)
     out = args.out or Path("tune_out") / Path(args.scene).stem
     sweep = Sweep(spec, out, overwrite=True)  # a tuning owns its directory
