@@ -263,6 +263,9 @@ def test_refuses_a_link_named_like_the_root():
 
     with pytest.raises(ValueError, match="link 'world'"):
         scene_urdf(parse_scene(text).model)
+    clash = Path(KINDS).read_text().replace("name: boom_joint,", "name: slot_slide,")
+    with pytest.raises(ValueError, match="joint 'slot_slide' clashes with the SDFormat joint"):
+        scene_urdf(parse_scene(clash).model)
     with pytest.raises(ValueError, match="zero pose"):
         scene_urdf(load_scene("four_bar").model, zero="home")
 

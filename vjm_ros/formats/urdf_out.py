@@ -141,17 +141,27 @@ def scene_urdf(model: Model, zero: str = "coordinates", plant: Plant | None = No
 
 
 def _check_names(model: Model) -> None:
-    names = set(model.link_names)
-    if ROOT_LINK in names:
+    """Refuse names the file would hold twice (SDFormat joints and links share the model)."""
+    links, joints = set(model.link_names), set(model.joint_names)
+    if ROOT_LINK in links:
         raise ValueError(f"link '{ROOT_LINK}': the URDF's root link has this name; rename the link")
     for cl in model.closures:
         for extra in _carriage_names(cl):
-            if extra in names:
+            if extra in links:
                 raise ValueError(f"link '{extra}' clashes with the carriage of closure '{cl.name}'")
+        for extra in _closure_joint_names(cl):
+            if extra in joints:
+                raise ValueError(f"joint '{extra}' clashes with the SDFormat joint of closure "
+                                 f"'{cl.name}'; rename the joint or the closure")
 
 
 def _carriage_names(closure) -> list[str]:
     return [] if closure.kind == HINGE else [f"{closure.name}_carriage"]
+
+
+def _closure_joint_names(closure) -> list[str]:
+    extra = {HINGE: [], SLIDER: ["_slide"], ANGLE: ["_x"]}[closure.kind]
+    return [closure.name] + [closure.name + e for e in extra]
 
 
 def _scale(model: Model) -> float:
