@@ -202,3 +202,21 @@ def test_the_csv_reports_the_applied_effort(tmp_path):
     _, w0, _ = step_integrals(t - DT, 6.0, 0.05, 0.003)
     expected = np.where(t > 0, (w1 - w0) / DT, 0.0)
     np.testing.assert_allclose(effort, expected, rtol=0, atol=1e-11 * 6.0)
+
+
+def test_a_lag_reaches_a_held_command_exactly_also_at_zero():
+    """Within about 36 time constants (2^-52 of the range) the lag state is the command itself,
+    towards a command of 0 too (where rounding alone would take ~750 time constants), so that
+    the ticks after it run as one block; until then, applied efforts follow the closed form."""
+    lag = 0.002  # 2 ticks
+    scene = parse_scene(rod(f"{{joint: pivot, limit: 20.0, gear: 3.0, time_constant: {lag}}}"))
+    sim = Simulator(scene.model, SimulationSettings(), scene.gains, scene.plant)
+    run(sim, 200, 2.0)
+    assert sim.actuation.settled(sim.efforts) and sim.tau[0] == 6.0
+    _, _, _, effort = run(sim, 200, 0.0)
+    assert sim.actuation.settled(sim.efforts) and effort[-1] == 0.0
+    ticks = np.arange(1, 201)
+    mean = 6.0 * lag / DT * (np.exp(-(ticks - 1) * DT / lag) - np.exp(-ticks * DT / lag))
+    np.testing.assert_allclose(effort, mean, rtol=0, atol=1e-12 * 6.0)
+    settled_at = int(np.argmax(effort == 0.0))
+    assert 30 * lag / DT < settled_at < 40 * lag / DT

@@ -16,8 +16,10 @@ tick ``k`` is the mean of the lag's output over that tick::
 with ``u[k] = G c[k - D]``. The impulse each tick delivers is then the continuous lag's (the
 closed form of ``integral of y`` over the tick, to round-off); ``T = 0`` gives ``a = b = 0`` (no
 lag), and before the first command every state is zero. Where rounding stops the recursion an
-ulp short of ``u`` (``y[k+1] == y[k]``), ``y`` takes its exact limit ``u``: a held command is then
-reached exactly, after which a block of ticks runs in one compiled call (:meth:`Actuation.settled`). The applied effort is what ``joint_states.effort`` and the
+ulp short of ``u`` (``y[k+1] == y[k]``), or comes within the rounding unit of the actuator's range
+(``2^-52 gear limit``, which towards ``u = 0`` saves the ~750 time constants of an underflow),
+``y`` takes its exact limit ``u``: a held command is then reached exactly, within about 36 time
+constants, after which a block of ticks runs in one compiled call (:meth:`Actuation.settled`). The applied effort is what ``joint_states.effort`` and the
 CSV's ``effort.<joint>`` report.
 
 An actuator with neither lag nor delay has no state: its gear is folded into the selection
@@ -79,6 +81,10 @@ class Actuation:
         self.carry = np.where(lagged, -np.expm1(-ratio) / ratio, 0.0)
         """``b = (T / dt)(1 - a)`` per actuator (0 without lag): the share of the lag's state in
         the tick's mean."""
+        limit = np.array([a.limit for a in model.actuators], dtype=float)
+        self.floor = np.where(np.isfinite(limit), np.abs(self.gear) * limit * 2.0**-52, 0.0)
+        """Deviation of a lag from its input below which it has arrived, per actuator: the
+        rounding unit of the largest effort it can apply (gear times limit), N m or N."""
         self.dynamic = bool(np.any(lagged) or np.any(self.delays > 0))
         self._columns = np.arange(m)
         self.reset()
@@ -112,9 +118,10 @@ class Actuation:
         y = self.lag
         applied = u + (y - u) * self.carry
         lag = u + (y - u) * self.decay
-        # Rounded, the recursion can stop an ulp short of u (y = u - ulp maps onto itself): the
-        # state then takes the limit of the exact recursion, u.
-        self.lag = np.where(lag == y, u, lag)
+        # Rounded, the recursion can stop an ulp short of u (y = u - ulp maps onto itself), and
+        # towards 0 it would take ~750 time constants to underflow: within the rounding unit of
+        # the actuator's range (floor) or stuck, the state takes the exact limit u.
+        self.lag = np.where((lag == y) | (np.abs(lag - u) <= self.floor), u, lag)
         return self.unit_selection @ applied
 
     def settled(self, command: np.ndarray) -> bool:
