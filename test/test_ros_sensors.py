@@ -56,9 +56,13 @@ def sensed(tmp_path):
         h.close()
 
 
-def test_joint_states_are_measured_and_the_ground_truth_is_exact(sensed):
+def test_joint_states_are_measured_and_the_ground_truth_is_exact(sensed, tmp_path):
+    """Live topics, and the node's MCAP log (rows collected tick by tick) read by rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    log = tmp_path / "run.mcap"
     h = sensed(rate_hz=1000.0, lockstep=True, lockstep_timeout=10.0, command_timeout=0.0,
-               realtime=False, duration=0.2, publish_clock=False)
+               realtime=False, duration=0.2, publish_clock=False, mcap=str(log))
     h.listen(TRUTH, JointState)
     h.on_joint_state(lambda msg: h.efforts.publish(Float64MultiArray(data=[3.0])))
     h.start()
@@ -87,6 +91,17 @@ def test_joint_states_are_measured_and_the_ground_truth_is_exact(sensed):
     effort = np.array([s[2] for s in got_truth])
     assert np.all(effort[:3] == 0.0) and 0.0 < effort[3] < effort[50] < 6.0
     assert not np.array_equal(np.array(got_measured)[:, 2], effort)  # noise on the effort
+
+    h.node.close()  # the log finalized (again at teardown: idempotent)
+    logged: dict[str, list] = {}
+    with AnyReader([log]) as reader:
+        for conn, _, raw in reader.messages():
+            if conn.msgtype == "sensor_msgs/msg/JointState":
+                m = reader.deserialize(raw, conn.msgtype)
+                logged.setdefault(conn.topic, []).append(
+                    (m.position[0], m.velocity[0], m.effort[0]))
+    assert np.array_equal(logged["/joint_states"][:201], got_measured)
+    assert np.array_equal(logged[TRUTH][:201], got_truth)
 
 
 def test_a_scene_without_sensors_has_no_ground_truth_topic(harness_plain):
