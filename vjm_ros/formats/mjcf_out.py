@@ -13,6 +13,9 @@ gravity are the scene's (docs/design.md section 1):
   inertias, so ``mass = max(m, eps)`` and ``diaginertia = (I/2 + eps, I/2 + eps, I + eps)``
   with ``eps`` = :attr:`MjcfSettings.inertia_epsilon` (1e-12: a point mass of the thesis scenes
   stays a point mass to 1e-10 relative); ``I/2`` about x and y is a thin lamina in the plane;
+* a joint's ``damping`` and ``armature`` as MuJoCo's, its Coulomb ``friction`` as MuJoCo's
+  ``frictionloss`` (a soft friction constraint: sticking within MuJoCo's ``solref``/``solimp``;
+  the smooth ``tanh`` model has no MuJoCo counterpart and is written the same way);
 * gravity ``(g_x, g_y, 0)``, the plane being MuJoCo's x-y plane; ``<option>`` sets the step and
   integrator; contacts are off (``<flag contact="disable">``) and the geoms (capsules along the
   links, for MuJoCo's viewer) carry no mass (``inertiafromgeom="false"``);
@@ -226,6 +229,21 @@ def _actuator(joint: str, limit: float, dyn: ActuatorDynamics, timestep: float) 
     return f"<motor {attrs}/>"
 
 
+def _joint_plant(joint, settings: MjcfSettings) -> str:
+    """MuJoCo joint attributes of the scene joint's damping, armature and Coulomb friction
+    (the friction constraint as stiff as the equalities: ``solreffriction``, ``solimpfriction``)."""
+    attrs = ""
+    for key, attr in (("damping", "damping"), ("armature", "armature"),
+                      ("friction", "frictionloss")):
+        value = float(getattr(joint, key, 0.0))
+        if value:
+            attrs += f' {attr}="{number(value)}"'
+    if getattr(joint, "friction", 0.0):
+        attrs += (f' solreffriction="{numbers(*settings.solref)}" '
+                  f'solimpfriction="{numbers(*settings.solimp)}"')
+    return attrs
+
+
 def _extra_names(closure) -> list[str]:
     if closure.kind == SLIDER:
         return [f"{closure.name}_carriage", f"{closure.name}_slide"]
@@ -239,6 +257,7 @@ class _Writer:
 
     def __init__(self, model: Model, settings: MjcfSettings, q: np.ndarray, qd: np.ndarray):
         self.model = model
+        self.settings = settings
         self.eps = float(settings.inertia_epsilon)
         self.carriage_mass = carriage_mass(model, settings)
         self.q = q
@@ -298,13 +317,14 @@ class _Writer:
         model, eps = self.model, self.eps
         link, joint = model.links[i], model.joints[i]
         lines = []
+        plant = _joint_plant(joint, self.settings)
         if joint.kind == REVOLUTE:
             lines.append(f'{inner}<joint name="{joint.name}" type="hinge" axis="0 0 1" '
-                         f'ref="{number(self.q[i])}"/>')
+                         f'ref="{number(self.q[i])}"{plant}/>')
         else:
             axis = numbers(math.sin(phi), math.cos(phi), 0.0)
             lines.append(f'{inner}<joint name="{joint.name}" type="slide" axis="{axis}" '
-                         f'ref="{number(self.q[i])}"/>')
+                         f'ref="{number(self.q[i])}"{plant}/>')
         self.qpos.append(float(self.q[i]))
         self.qvel.append(float(self.qd[i]))
         inertia = float(link.inertia)

@@ -26,7 +26,8 @@ closure joint at the pose it loads a model in, so for Gazebo write the file with
 ``zero="initial"``: each joint origin then takes in the scene's initial coordinate, the zero
 pose is the scene's (closed) initial state and a URDF position is ``q - q0``.
 
-Inertials: mass ``m_i`` at ``(p_i, q_i, 0)``, ``izz = I_i`` (centroidal, about z); ``ixx = iyy =
+A joint's viscous ``damping`` and Coulomb ``friction`` are its ``<dynamics>`` (URDF has no
+armature). Inertials: mass ``m_i`` at ``(p_i, q_i, 0)``, ``izz = I_i`` (centroidal, about z); ``ixx = iyy =
 I_i / 2``, the inertia of a thin lamina in the plane (perpendicular-axis theorem), which is valid
 (triangle inequality) and plays no part in planar motion. Links without mass get no
 ``<inertial>`` (URDF's default: massless).
@@ -313,6 +314,9 @@ def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     if kind == "prismatic":
         attrs = {"lower": number(-UNBOUNDED), "upper": number(UNBOUNDED), **attrs}
     ET.SubElement(el, "limit", **attrs)
+    damping, friction = (float(getattr(joint, k, 0.0)) for k in ("damping", "friction"))
+    if damping or friction:
+        ET.SubElement(el, "dynamics", damping=number(damping), friction=number(friction))
     return el
 
 
