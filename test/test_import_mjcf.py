@@ -40,6 +40,8 @@ def mujoco_qpos(path, seconds: float = 1.0) -> np.ndarray:
     m.eq_solref[:] = [2e-3, 1.0]
     m.eq_solimp[:] = [0.99999, 0.99999, 0.001, 0.5, 2]
     d = mujoco.MjData(m)
+    if m.nkey:  # the file's start, as the import takes it
+        mujoco.mj_resetDataKeyframe(m, d, 0)
     d.ctrl[:] = CONTROLS
     qpos = []
     for _ in range(int(round(seconds * 1000))):
@@ -90,6 +92,41 @@ def test_site_connect_and_weld_follow_mujoco(tmp_path, variant, closures):
     qpos = mujoco_qpos(path)
     for k, joint in enumerate(JOINTS):
         assert np.ptp(qpos[:, k]) > 0.3
+        np.testing.assert_allclose(ours["q"][joint], qpos[:, k], rtol=0, atol=2e-6)
+
+
+def test_a_weld_at_an_explicit_relpose_from_a_keyframe_follows_mujoco(tmp_path):
+    """A weld whose ``relpose`` is the distal links' relative pose at another configuration
+    than ``qpos0`` (where MuJoCo's connect run has taken the five-bar after 0.3 s), the model
+    starting there from a keyframe: the weld's points and angle come from ``relpose``, not from
+    ``qpos0``. Against MuJoCo as above (2e-6 rad)."""
+    m = mujoco.MjModel.from_xml_path(str(MODELS / "five_bar.xml"))
+    d = mujoco.MjData(m)
+    d.ctrl[:] = CONTROLS
+    for _ in range(300):
+        mujoco.mj_step(m, d)
+    mujoco.mj_kinematics(m, d)
+    b1, b2 = (mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)
+              for n in ("left_distal", "right_distal"))
+    r1, r2 = d.xmat[b1].reshape(3, 3), d.xmat[b2].reshape(3, 3)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, (r1.T @ r2).flatten())
+    relpose = [*(r1.T @ (d.xpos[b2] - d.xpos[b1])), *quat]
+    assert np.linalg.norm(d.qpos - m.qpos0) > 0.3  # far from qpos0
+    text = (MODELS / "five_bar.xml").read_text().replace(
+        '<connect name="pin_joint" body1="left_distal" body2="right_distal" anchor="0.5 0 0"/>',
+        '<weld name="pin_joint" body1="left_distal" body2="right_distal" '
+        f'relpose="{" ".join(repr(float(x)) for x in relpose)}"/>')
+    text = text.replace("</mujoco>", "  <keyframe><key qpos=\""
+                        + " ".join(repr(float(x)) for x in d.qpos) + "\"/></keyframe>\n</mujoco>")
+    path = tmp_path / "five_bar_weld.xml"
+    path.write_text(text)
+    scene = load_scene(path)
+    assert "assemble" not in import_model(path).document  # the keyframe closes the weld
+    ours = run(scene, 1.0, efforts=CONTROLS)
+    qpos = mujoco_qpos(path)
+    for k, joint in enumerate(JOINTS):
+        assert np.ptp(qpos[:, k]) > 0.1
         np.testing.assert_allclose(ours["q"][joint], qpos[:, k], rtol=0, atol=2e-6)
 
 

@@ -90,6 +90,9 @@ class GraphJoint:
         Joint position at the start, rad or m.
     velocity : float
         Joint rate at the start, rad/s or m/s.
+    turn : ndarray, shape (3, 3), or None
+        A fixed or prismatic constraint's rotation of the child relative to the parent, from
+        the zero pose to where the constraint holds (None: the bodies' own ``turn``).
     element : str
         Where the joint is written, for messages.
     """
@@ -105,6 +108,7 @@ class GraphJoint:
     start: float = 0.0
     element: str = ""
     velocity: float = 0.0
+    turn: np.ndarray | None = None
 
 
 @dataclass

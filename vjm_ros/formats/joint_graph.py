@@ -484,7 +484,13 @@ class _Reducer:
             if j.kind in (PRISMATIC, FIXED, ALIGN):
                 la, lb = self.group_of[pb], self.group_of[pa]
                 target = {"ground": True} if lb == WORLD else {"link": scene_name(lb)}
-                offset = self.constraint_angle(la) - self.constraint_angle(lb)
+                if j.turn is None:
+                    offset = self.constraint_angle(la) - self.constraint_angle(lb)
+                else:  # the child's turn relative to the parent where the constraint holds
+                    t = j.turn @ self.e1
+                    turn = math.atan2(float(t @ self.e2), float(t @ self.e1))
+                    psi = {k: (0.0 if k == WORLD else self.frame[k][1]) for k in (la, lb)}
+                    offset = psi[la] - psi[lb] + (turn if la == b else -turn)
                 out.append({"name": name if j.kind == ALIGN else f"{name}_angle",
                             "type": "angle", "link": scene_name(la), "target": target,
                             "offset": _num(offset)})

@@ -10,7 +10,8 @@ and includes applied. Then:
   the scene starts at the first keyframe (``qpos``, ``qvel``) or, without one, at ``qpos0`` (the
   pose the file writes, shifted by each joint's ``ref``) at rest;
 * ``<equality>``: ``connect`` (``body1`` + ``anchor``, or ``site1``/``site2``) keeps two points
-  together, ``weld`` (with the relative pose at ``qpos0``) also keeps the relative angle;
+  together, ``weld`` (at its ``relpose``, or the relative pose at ``qpos0``) also keeps the
+  relative angle;
   inactive equalities are left out; ``joint``, ``tendon`` and ``flex`` equalities are refused;
 * ``<actuator><motor>`` on a joint: an actuator whose command is MuJoCo's control (``gear``
   becomes the actuator's ``gear``; a negative gear is folded into the limit of the joint effort),
@@ -184,27 +185,33 @@ class _MjcfReader:
                 b1, b2 = o1, o2
                 if kinds[kind] == CONNECT:  # anchor in body1's frame
                     world = self.start.xpos[b1] + self.start.xmat[b1].reshape(3, 3) @ m.eq_data[e, :3]
-                else:  # weld: anchor in body2's frame
-                    world = self.start.xpos[b2] + self.start.xmat[b2].reshape(3, 3) @ m.eq_data[e, :3]
-                p1, p2 = self.to_zero(b1, world), self.to_zero(b2, world)
-            if kinds[kind] == FIXED and not sites and self.explicit_relpose(name, e):
-                raise self.fail(f"{where} relpose", "a weld at the relative pose of qpos0 "
-                                "(relpose left out)", "an explicit relpose")
+                    p1, p2 = self.to_zero(b1, world), self.to_zero(b2, world)
+            turn = None
+            if kinds[kind] == FIXED and not sites:
+                p1, p2, turn = self.weld(b1, b2, m.eq_data[e])
             out.append(GraphJoint(name=name, kind=kinds[kind], parent=self.body_name(b2),
                                   child=self.body_name(b1), point=p2, child_point=p1,
                                   axis=np.array([0.0, 0.0, 1.0]), role=CONSTRAINT,
-                                  element=where))
+                                  element=where, turn=turn))
         return out
 
-    def explicit_relpose(self, name: str, e: int) -> bool:
-        welds = self.root.findall(".//equality/weld")
-        el = next((w for w in welds if w.get("name") == name), None)
-        if el is None and not name.startswith("equality"):
-            return False
-        if el is None:
-            unnamed = [w for w in welds if not w.get("name")]
-            el = unnamed[0] if unnamed else None
-        return el is not None and el.get("relpose") is not None
+    def weld(self, b1: int, b2: int, data: np.ndarray):
+        """A body weld's two points at the zero pose and body1's turn relative to body2.
+
+        MuJoCo holds body2 at ``relpose`` in body1's frame (``eq_data[3:10]``, filled from
+        ``qpos0`` when the file leaves it out) and its anchor (``eq_data[:3]``, body2's frame)
+        at the same place of body1.
+        """
+        r1, r2 = self.zero.xmat[b1].reshape(3, 3), self.zero.xmat[b2].reshape(3, 3)
+        rel = np.zeros(9)
+        self.mj.mju_quat2Mat(rel, np.asarray(data[6:10], dtype=float))
+        rel = rel.reshape(3, 3)
+        anchor = np.asarray(data[:3], dtype=float)
+        p2 = self.zero.xpos[b2] + r2 @ anchor
+        p1 = self.zero.xpos[b1] + r1 @ (np.asarray(data[3:6], dtype=float) + rel @ anchor)
+        # at the weld r1' = T1 r1, r2' = T2 r2 (turns about the normal) and r1'^T r2' = rel,
+        # so T1^T T2 = r1 rel r2^T: body1's turn relative to body2 is its transpose
+        return p1, p2, r2 @ rel.T @ r1.T
 
     def actuators(self, ignored: list) -> list:
         m, mj = self.m, self.mj
