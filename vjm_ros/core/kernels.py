@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from vjm_ros.core.hub_linalg import hub_correction, hub_implicit_solve
+from vjm_ros.core.joint_friction import friction_efforts
 from vjm_ros.core.layout import (
     C_VX,
     C_VY,
@@ -47,6 +48,7 @@ from vjm_ros.core.layout import (
     P_METHOD,
     P_PLANT,
     P_RCOND,
+    P_STICK,
     PENALTY,
     R_BIAS,
     R_FORCE,
@@ -223,7 +225,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
     """
     lint, lflt, cint, cflt, gains, par, blocks = model
     (kin, mm, bias, cm, crow, jac, points, lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi,
-     scratch, _, zero, touch, lay) = data
+     scratch, _, zero, touch, lay, wcols, column, impulse) = data
     n = q0.shape[0]
     r = crow.shape[0]
     then_evaluate = op >= THEN_EVALUATE
@@ -286,6 +288,9 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
     total = 1 if single else steps * stages + (1 if then_evaluate else 0)
     # ks: stage accelerations, vs: stage velocities
     acc = out_a if single else scratch
+    friction = par[P_STICK] != 0.0 and not single
+    if friction:
+        impulse[n] = 0.0
     for it in range(total):
         last = then_evaluate and it == total - 1  # the evaluation at the end state
         stage = 0 if last else it % stages
@@ -295,6 +300,9 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
             for j in range(n):
                 qi[j] = q[j]
                 vs[0, j] = qd[j]
+            if friction and not last:
+                for j in range(n):
+                    impulse[j] = 0.0  # chosen once this stage's accelerations are known
         else:
             cst = 1.0 if stage == 3 else 0.5
             for j in range(n):
@@ -317,6 +325,8 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
                     crow[i, R_FORCE] = -(gains[i, 0] * crow[i, R_RES] + gains[i, 1] * crow[i, R_RATE])
             for j in range(n):
                 s = tau[j] - bias[j]
+                if friction and not last:
+                    s = s + impulse[j]  # the step's friction efforts, held
                 if not exact:
                     t = 0.0
                     for i in range(r):
@@ -407,6 +417,13 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
                     acc[j] += qd[j]
             if op == IMPLICIT_VELOCITY:
                 return status
+        if friction and not last and stage == 0:
+            for j in range(n):
+                column[j] = qd[j]  # the rates at the start of the step
+            status = max(status, friction_efforts(
+                acc, qd, h, op == IMPLICIT_EULER, exact, lflt, par, mm, jac, vec[2], lu, piv,
+                minv_at, g, v, vec, rhs, corr, wcols, impulse, blocks, touch))
+        if op == IMPLICIT_EULER:
             for j in range(n):
                 qd[j] = acc[j]
                 q[j] = q[j] + h * qd[j]
@@ -429,6 +446,13 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
                     qd[j] = qd[j] + h * (
                         B16 * ks[0, j] + B13 * ks[1, j] + B13 * ks[2, j] + B16 * ks[3, j]
                     )
+        if friction and not last and stage == stages - 1:
+            removed = 0.0  # the friction's work over the step, trapezoid in the rates
+            for j in range(n):
+                removed -= h * impulse[j] * 0.5 * (column[j] + qd[j])
+            impulse[n] += removed
+    if friction and steps > 0 and h > 0.0:
+        impulse[n] = impulse[n] / (h * steps)  # energy removed -> mean power over the call
     return status
 
 

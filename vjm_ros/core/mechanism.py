@@ -209,6 +209,12 @@ class Mechanism:
                    for e in (self._step, self._advance_ticks))
 
     @property
+    def friction_power(self) -> float:
+        """Mean power the sticking joint friction took over the last call of a fixed-step
+        method, W (:mod:`vjm_ros.core.joint_friction`)."""
+        return float(self._data.impulse[self.n])
+
+    @property
     def is_penalty(self) -> bool:
         """True when closures are enforced by penalty forces."""
         return isinstance(self._method, PenaltyClosure)

@@ -84,6 +84,11 @@ class Joint:
     armature : float
         Reflected rotor inertia, kg m^2 or kg, added to the mass matrix's diagonal entry of the
         coordinate (its kinetic energy ``armature * rate^2 / 2``).
+    friction : float
+        Coulomb friction bound, N m or N (0: none).
+    friction_scale : float
+        0 for sticking friction (:mod:`vjm_ros.core.joint_friction`), else the velocity scale
+        ``v_s`` (rad/s or m/s) of the smooth model ``-friction * tanh(rate / v_s)``.
     """
 
     name: str
@@ -93,6 +98,8 @@ class Joint:
     velocity: float = 0.0
     damping: float = 0.0
     armature: float = 0.0
+    friction: float = 0.0
+    friction_scale: float = 0.0
 
     @property
     def position(self) -> float:
@@ -287,6 +294,8 @@ class Model:
     locked_slide: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     damping: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     armature: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    friction: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    friction_scale: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
 
     @classmethod
     def build(
@@ -374,12 +383,20 @@ class Model:
         model.locked_slide = np.array([j.slide for j in joints], dtype=float)
         model.damping = np.array([j.damping for j in joints], dtype=float)
         model.armature = np.array([j.armature for j in joints], dtype=float)
+        model.friction = np.array([j.friction for j in joints], dtype=float)
+        model.friction_scale = np.array([j.friction_scale for j in joints], dtype=float)
         return model
 
     @property
     def has_plant_terms(self) -> bool:
-        """True when a joint has damping or armature, or the scene has loads."""
-        return bool(self.loads) or bool(np.any(self.damping)) or bool(np.any(self.armature))
+        """True when a joint has damping, armature or smooth friction, or the scene has loads."""
+        return (bool(self.loads) or bool(np.any(self.damping)) or bool(np.any(self.armature))
+                or bool(np.any((self.friction > 0) & (self.friction_scale > 0))))
+
+    @property
+    def has_stick_friction(self) -> bool:
+        """True when a joint has sticking Coulomb friction."""
+        return bool(np.any((self.friction > 0) & (self.friction_scale == 0)))
 
     # ------------------------------------------------------------------ names and lookups
     @property
@@ -433,10 +450,11 @@ class Model:
         return s
 
     def without_plant_terms(self) -> Model:
-        """This model without joint damping, armature and loads (itself when it has none)."""
-        if not self.has_plant_terms:
+        """This model without joint damping, armature, friction and loads (itself when it has
+        none)."""
+        if not (self.has_plant_terms or self.has_stick_friction):
             return self
-        joints = tuple(replace(j, damping=0.0, armature=0.0) for j in self.joints)
+        joints = tuple(replace(j, damping=0.0, armature=0.0, friction=0.0) for j in self.joints)
         return Model.build(self.name, self.chains, self.links, joints, self.closures,
                            self.actuators, self.points, tuple(self.gravity), self.source_text,
                            self.extras)

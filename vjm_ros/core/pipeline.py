@@ -157,8 +157,13 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
             dissipation += gains[i, 1] * (rate * rate)
     if par[layout.P_PLANT] != 0.0:
         lflt = model[1]
-        for j in range(n):  # viscous joint damping, c qd^2
+        for j in range(n):  # viscous joint damping, c qd^2, and smooth friction
             dissipation += lflt[j, layout.F_DAMPING] * (qd[j] * qd[j])
+            if lflt[j, layout.F_FRICTION_SCALE] > 0.0:
+                dissipation += lflt[j, layout.F_FRICTION] * math.tanh(
+                    qd[j] / lflt[j, layout.F_FRICTION_SCALE]) * qd[j]
+    if par[layout.P_STICK] != 0.0:
+        dissipation += data[25][n]  # the friction impulses' mean power over the last tick
     kinetic = kin[n, layout.K_PCOS]
     potential = kin[n, layout.K_PSIN]
     spring = kin[n, layout.K_SLIDE]

@@ -34,6 +34,8 @@ from vjm_ros.core.layout import (
     F_COM_P,
     F_COM_Q,
     F_DAMPING,
+    F_FRICTION,
+    F_FRICTION_SCALE,
     F_INERTIA,
     F_LOAD_A,
     F_LOAD_B,
@@ -145,8 +147,8 @@ def _com_column(lint, kin, k, cx, cy):
 
 @_jit(allocates=False)
 def plant_terms(qd, lint, lflt, kin, mm, bias):
-    """Add the joints' armature to ``M``'s diagonal, their viscous damping to ``b``
-    (``b += c qd``) and the generalized forces of the links' loads to ``b`` (``b -= Q``).
+    """Add the joints' armature to ``M``'s diagonal, their viscous damping (``b += c qd``) and
+    smooth friction (``b += mu tanh(qd / v_s)``) to ``b``, and the generalized forces of the links' loads to ``b`` (``b -= Q``).
 
     The loads of link ``i`` act as the world force ``F`` at its origin ``O_i`` and the moment
     ``M_i = A cos(theta_i) + B sin(theta_i) + Tz`` (layout of ``lflt``): on a revolute
@@ -157,6 +159,8 @@ def plant_terms(qd, lint, lflt, kin, mm, bias):
     for k in range(n):
         mm[k, k] += lflt[k, F_ARMATURE]
         bias[k] += lflt[k, F_DAMPING] * qd[k]
+        if lflt[k, F_FRICTION_SCALE] > 0.0:  # smooth Coulomb friction
+            bias[k] += lflt[k, F_FRICTION] * math.tanh(qd[k] / lflt[k, F_FRICTION_SCALE])
     for i in range(n):
         fx = lflt[i, F_LOAD_FX]
         fy = lflt[i, F_LOAD_FY]

@@ -324,7 +324,8 @@ class SceneBuilder:
                 com = self.vector(lk.get("com", [length / 2.0, 0.0]), f"{lkey}.com")
                 jkey = f"{lkey}.joint"
                 jt = self.mapping(jt, jkey, {"name", "type", "angle", "slide", "velocity",
-                                             "damping", "armature"})
+                                             "damping", "armature", "friction",
+                                             "friction_model", "velocity_scale"})
                 jname = self.name(jt.get("name", f"{cname}_joint{i + 1}"), f"{jkey}.name")
                 if jname in joint_names:
                     raise self.fail(f"{jkey}.name", "a joint name used once in the scene", jname)
@@ -338,16 +339,36 @@ class SceneBuilder:
                     if kind == "revolute"
                     else self.number(rate_raw, f"{jkey}.velocity")
                 )
-                damping, armature = (self.number(jt.get(k, 0.0), f"{jkey}.{k}", minimum=0.0)
-                                     for k in ("damping", "armature"))
+                damping, armature, friction = (
+                    self.number(jt.get(k, 0.0), f"{jkey}.{k}", minimum=0.0)
+                    for k in ("damping", "armature", "friction"))
                 joints.append(Joint(jname, kind, absolute - prev_angle, slide, rate, damping,
-                                    armature))
+                                    armature, friction, self.friction_scale(jt, jkey)))
                 links.append(Link(lname, c, length, mass, inertia, com))
                 self.link_key.append(lkey)
                 idx.append(len(links) - 1)
                 prev_angle = absolute
             chains.append(Chain(cname, origin, base_angle, base_len, tuple(idx)))
         return chains, links, joints
+
+    def friction_scale(self, joint: dict, key: str) -> float:
+        """0 for sticking friction (``friction_model: stick``, the default), the velocity scale
+        of ``friction_model: smooth`` (rad/s, in the file's angle unit, or m/s)."""
+        model = self.choice(joint.get("friction_model", "stick"), f"{key}.friction_model",
+                            ("stick", "smooth"))
+        if model == "stick":
+            if "velocity_scale" in joint:
+                raise self.fail(f"{key}.velocity_scale", "no velocity_scale with "
+                                "friction_model: stick (only smooth friction has one)",
+                                joint["velocity_scale"])
+            return 0.0
+        scale = self.require(joint, "velocity_scale", key, "a required key with "
+                             "friction_model: smooth")
+        value = (self.angle(scale, f"{key}.velocity_scale") if joint.get("type") == "revolute"
+                 else self.number(scale, f"{key}.velocity_scale"))
+        if not value > 0:
+            raise self.fail(f"{key}.velocity_scale", "a positive rate", scale)
+        return value
 
     def link_ref(self, value, key: str) -> int:
         """Index of the link named ``value``."""

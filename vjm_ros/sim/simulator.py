@@ -605,8 +605,16 @@ class Simulator:
         # it, in order: numpy's pairwise sums differ in the last bit from 8 rows on)
         dissipation = (_sum_in_order(mech.method.kv * ev.closure.rate**2) if mech.is_penalty
                        else 0.0)
-        if model.has_plant_terms:  # viscous joint damping, c qd^2, summed after the closures
-            dissipation = _sum_in_order(np.concatenate(([dissipation], model.damping * self.qd**2)))
+        if model.has_plant_terms:  # joint damping and smooth friction, after the closures
+            scale = np.where(model.friction_scale > 0, model.friction_scale, 1.0)
+            smooth = np.where(model.friction_scale > 0,
+                              model.friction * np.tanh(self.qd / scale) * self.qd, 0.0)
+            terms = np.column_stack((model.damping * self.qd**2, smooth)).reshape(-1)
+            terms = terms[np.column_stack((np.ones(model.n, bool),
+                                           model.friction_scale > 0)).reshape(-1)]
+            dissipation = _sum_in_order(np.concatenate(([dissipation], terms)))
+        if model.has_stick_friction:  # the friction impulses' mean power over the last tick
+            dissipation += mech.friction_power
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())

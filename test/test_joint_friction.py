@@ -1,0 +1,172 @@
+"""Coulomb friction in the joints: sticking, sliding, and the energy it takes.
+
+Oracles written here from the definition of Coulomb friction, not from the kernels:
+
+* a pendulum with friction ``mu`` at its pivot, released outside its sticking region: by energy,
+  each half swing from a turning point ``a`` ends at the turning point ``b`` on the other side
+  where ``V(a) - V(b) = mu |a - b|`` (the friction's work over the angle swept); the first ``b``
+  where ``|dV/dtheta| <= mu`` is where it stops and stays;
+* the energy ledger: what the mechanism lost equals the friction's work, in a five-bar with
+  friction in every joint too, which also converges (first order) when the step is halved;
+* smooth friction ``-mu tanh(rate / v_s)`` in the forward dynamics against the bias of the plain
+  Lagrangian oracle of ``test/chains.py``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import chains as ch
+import numpy as np
+import pytest
+
+from vjm_ros.core.constraints import PenaltyClosure
+from vjm_ros.core.errors import SceneError
+from vjm_ros.core.mechanism import Mechanism
+from vjm_ros.core.model import Model
+from vjm_ros.scene.loader import builtin_scene_text, parse_scene
+from vjm_ros.sim.settings import SimulationSettings
+from vjm_ros.sim.simulator import Simulator
+
+MGP = 9.81 * 0.5  # the rod's m g p, N m
+ROD = """
+name: rod
+chains:
+  - name: arm
+    links:
+      - {name: rod, length: 1.0, mass: 1.0, inertia: 0.0833333333333333, com: [0.5, 0.0],
+         joint: {name: pivot, type: revolute, angle: %s, %s}}
+"""
+
+
+def _samples(scene, seconds, rate=1000.0, integrator="rk4", closure=None, substeps=1):
+    kw = {"closure": closure} if closure else {}
+    settings = SimulationSettings(integrator=integrator, rate=rate, substeps=substeps, **kw)
+    sim = Simulator(scene.model, settings, scene.gains if closure != "exact" else {})
+    out = [sim.sample()]
+    for _ in range(int(round(seconds * rate))):
+        sim.advance()
+        out.append(sim.sample())
+    return out
+
+
+def _turning_points(start: float, mu: float) -> list[float]:
+    """Turning points of the rod from rest at ``start`` by the energy balance of each half
+    swing, until one lies in the sticking region ``|MGP cos(theta)| <= mu``."""
+    hanging = -np.pi / 2
+    points = [start]
+    while abs(MGP * np.cos(points[-1])) > mu:
+        a = points[-1]
+        lo, hi = (hanging, 2 * hanging - a) if a > hanging else (2 * hanging - a, hanging)
+        f = lambda b: MGP * np.sin(a) - MGP * np.sin(b) - mu * abs(a - b)  # noqa: E731
+        # f > 0 at the hanging angle (energy left), < 0 at the mirror of a: one root between
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if (f(mid) > 0) == (f(lo) > 0):
+                lo = mid
+            else:
+                hi = mid
+        points.append(0.5 * (lo + hi))
+    return points
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "semi_implicit_euler"])
+def test_pendulum_stops_where_the_energy_balance_says_and_stays(integrator):
+    mu, start = 1.0, -np.pi / 2 + 1.0
+    scene = parse_scene(ROD % (start, f"friction: {mu}"))
+    samples = _samples(scene, 8.0, integrator=integrator)
+    theta = np.array([s.q[0] for s in samples])
+    rate = np.array([s.qd[0] for s in samples])
+    expected = _turning_points(start, mu)
+    assert len(expected) >= 3  # it swings a few times before it sticks
+    # one impulse per 1 ms step: the friction is first order in h; the stop angle moves by
+    # ~h * |rate| ~ 1e-3 rad at the last reversal
+    assert theta[-1] == pytest.approx(expected[-1], abs=3e-3)
+    # from here on the rate is round-off: the held friction cancels the other efforts to the
+    # last bits, and RK4's later stages see what is left (~1e-17 rad/s^2)
+    still = np.flatnonzero(np.abs(rate) > 1e-12)[-1] + 1
+    assert still < len(samples) - 2000  # it stuck more than 2 s before the end and stayed
+    assert np.ptp(theta[still:]) < 1e-12
+    assert abs(MGP * np.cos(theta[-1])) <= mu  # inside the sticking region
+    # the ledger: the energy lost is the friction's work
+    t = np.array([s.t for s in samples])
+    energy = np.array([s.energy[3] for s in samples])
+    diss = np.array([s.dissipation for s in samples])
+    work = np.concatenate(([0.0], np.cumsum(0.5 * (diss[1:] + diss[:-1]) * np.diff(t))))
+    lost = energy[0] - energy
+    assert lost[-1] == pytest.approx(MGP * (np.sin(start) - np.sin(theta[-1])), rel=1e-9)
+    # reported per tick as the mean power of its steps, integrated by the trapezoid rule:
+    # off by half a tick's work at the reversals, ~mu * |rate| * h / 2 ~ 1e-3 J
+    assert np.max(np.abs(lost - work)) < 5e-3
+
+
+def test_a_pendulum_inside_its_sticking_region_never_moves():
+    scene = parse_scene(ROD % (-np.pi / 2 + 0.1, "friction: 1.0"))  # |MGP cos| = 0.49 < 1
+    samples = _samples(scene, 1.0)
+    assert max(abs(s.q[0] - samples[0].q[0]) for s in samples) < 1e-12  # round-off, see above
+    assert max(abs(s.qd[0]) for s in samples) < 1e-12
+
+
+def _five_bar_with_friction(mu: float) -> Model:
+    text = builtin_scene_text("five_bar")
+    for angle in ("45.0", "135.0"):
+        text = text.replace(f"type: revolute, angle: {angle}}}",
+                            f"type: revolute, angle: {angle}, friction: {mu}}}")
+    return parse_scene(text)
+
+
+@pytest.mark.parametrize("closure", ["exact", "penalty"])
+def test_five_bar_with_friction_in_every_joint_keeps_its_ledger(closure):
+    scene = _five_bar_with_friction(0.3)
+    assert np.count_nonzero(scene.model.friction) == 4
+    samples = _samples(scene, 2.0, closure=closure)
+    t = np.array([s.t for s in samples])
+    energy = np.array([s.energy[3] for s in samples])
+    rate = np.array([s.power_in - s.dissipation for s in samples])
+    work = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))))
+    assert energy[0] - energy[-1] > 0.5  # friction took a good part of the motion's energy
+    # trapezoid of per-tick mean powers (~half a tick's work per reversal) and, for exact
+    # closures, Baumgarte's work on residuals ~1e-9
+    assert np.max(np.abs(energy - energy[0] - work)) < 2e-2
+
+
+def test_five_bar_with_friction_converges_when_the_step_is_halved():
+    """First order: the error at 1 s roughly halves with the step (against h/16)."""
+    scene = _five_bar_with_friction(0.3)
+    end = {}
+    for substeps in (1, 2, 4, 16):
+        end[substeps] = _samples(scene, 1.0, closure="exact", substeps=substeps)[-1].q
+    errors = [np.max(np.abs(end[s] - end[16])) for s in (1, 2, 4)]
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[0] / errors[2] > 2.5  # ~4 for first order; stick-slip events blur it
+
+
+def test_smooth_friction_in_the_forward_dynamics():
+    rng = np.random.default_rng(7)
+    model = ch.random_model(rng, 4, 2)
+    joints = tuple(replace(j, friction=float(rng.uniform(0.5, 2.0)),
+                           friction_scale=float(rng.uniform(0.05, 0.5))) for j in model.joints)
+    model = Model.build(model.name, model.chains, model.links, joints, gravity=tuple(model.gravity))
+    mech = Mechanism(model, PenaltyClosure(np.zeros(0), np.zeros(0)))
+    q, qd = ch.random_state(rng, model)
+    tau = rng.uniform(-2.0, 2.0, model.n)
+    bias = (ch.mass_matrix_fd(model, q + 1e-5 * qd) - ch.mass_matrix_fd(model, q - 1e-5 * qd)) / 2e-5 @ qd
+    bias = bias - ch.coordinate_jacobian(lambda x: np.array(ch.kinetic(model, x, qd)), q, 1e-5)
+    bias = bias + ch.potential_gradient_fd(model, q)
+    friction = model.friction * np.tanh(qd / model.friction_scale)
+    expected = np.linalg.solve(ch.mass_matrix_fd(model, q), tau - bias - friction)
+    # central differences: ~1e-8 relative (test_plant_terms.py)
+    np.testing.assert_allclose(mech.accelerations(q, qd, tau), expected, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("keys,key,expected", [
+    ("friction: -1.0", "friction", "a number >= 0"),
+    ("friction: 1.0, friction_model: viscous", "friction_model", "stick"),
+    ("friction: 1.0, velocity_scale: 0.1", "velocity_scale", "no velocity_scale"),
+    ("friction: 1.0, friction_model: smooth", "joint", "velocity_scale"),
+    ("friction: 1.0, friction_model: smooth, velocity_scale: 0", "velocity_scale", "positive"),
+])
+def test_bad_friction_is_refused_naming_the_key(keys, key, expected):
+    with pytest.raises(SceneError, match=key) as info:
+        parse_scene(ROD % (0.0, keys))
+    assert expected in str(info.value)
