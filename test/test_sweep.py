@@ -78,7 +78,7 @@ def test_bad_specs_are_refused_naming_the_key(text, key, expected):
 def test_an_unreachable_scheduler_is_refused_before_any_run():
     with pytest.raises(ConfigurationError, match=r"--cluster tcp://127\.0\.0\.1:9: expected a "
                                                  r"reachable Dask scheduler"):
-        with Engine("tcp://127.0.0.1:9", timeout=2.0):
+        with Engine("tcp://127.0.0.1:9", timeout=1.0):
             pass
 
 
