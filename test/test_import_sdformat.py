@@ -152,3 +152,14 @@ def test_joint_axes_are_read_in_the_frame_of_the_files_version(tmp_path, version
                     f'<child>a</child><axis>{axis_xml}</axis></joint></model></sdf>')
     (joint,) = read_sdformat(str(path)).joints
     np.testing.assert_allclose(joint.axis, expected, atol=1e-15)
+
+
+def test_actuate_adds_actuators_and_keeps_the_actuated_joint_a_coordinate():
+    doc = import_model(MODELS / "four_bar.sdf", ("ground_joint",)).document
+    names = [lk["joint"]["name"] for ch in doc["chains"] for lk in ch["links"]]
+    assert "ground_joint" in names  # in a joint graph an actuated joint is put in a chain
+    assert doc["actuators"] == [{"joint": "ground_joint"}]
+    assert len(doc["closures"]) == 1 and doc["closures"][0]["name"] != "ground_joint"
+    with pytest.raises(SceneError) as err:
+        import_model(MODELS / "four_bar.sdf", ("no_such_joint",))
+    assert "--actuate" in str(err.value) and "no_such_joint" in str(err.value)

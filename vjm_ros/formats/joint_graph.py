@@ -50,6 +50,7 @@ class _Reducer(SceneWriter):
     def __init__(self, graph: JointGraph, actuate: tuple[str, ...]):
         self.g = graph
         self.path = graph.source
+        self.extra = tuple(actuate)
         self.actuated = {a.joint for a in graph.actuators} | set(actuate)
 
     def fail(self, where: str, expected: str, found: object = ...) -> SceneError:
@@ -401,9 +402,7 @@ def reduce_graph(graph: JointGraph, actuate: tuple[str, ...] = ()) -> dict:
     SceneError
         Naming the file and the element the planar model cannot represent.
     """
-    reducer = _Reducer(collapse_carriages(graph), tuple(actuate))
-    reducer.extra = tuple(actuate)
-    return reducer.document()
+    return _Reducer(collapse_carriages(graph), tuple(actuate)).document()
 
 
 def _psi_normal(d: np.ndarray) -> float:
