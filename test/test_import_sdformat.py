@@ -163,3 +163,28 @@ def test_actuate_adds_actuators_and_keeps_the_actuated_joint_a_coordinate():
     with pytest.raises(SceneError) as err:
         import_model(MODELS / "four_bar.sdf", ("no_such_joint",))
     assert "--actuate" in str(err.value) and "no_such_joint" in str(err.value)
+
+
+def test_another_cut_of_the_loop_when_a_link_would_point_away_from_its_next_joint(tmp_path):
+    """A loop world - a - b - c - d - world whose links a, b, c point at 0, 120 and 240 deg at
+    the file's pose: one chain a-b-c-d would need one frame angle for a, b, c with each next
+    joint ahead (impossible over 240 deg), so the loop is cut at c-d instead (chains a-b-c and
+    d). The file's pose closes the loops in the frames placed (no assembly: the scene's own
+    closure check, 1e-6)."""
+    pts = {"a": (0.0, 0.0, 0.0), "b": (1.0, 0.0, 120.0), "c": (0.5, 0.8660254037844386, 240.0),
+           "d": (0.0, 0.0, 180.0)}
+    links = "".join(f'<link name="{n}"><pose>{x!r} {y!r} 0 0 0 {math.radians(a)!r}</pose></link>'
+                    for n, (x, y, a) in pts.items())
+    joints = "".join(
+        f'<joint name="j{c}" type="revolute"><parent>{p}</parent><child>{c}</child>'
+        "<axis><xyz>0 0 1</xyz></axis></joint>"
+        for p, c in (("world", "a"), ("a", "b"), ("b", "c"), ("c", "d")))
+    joints += ('<joint name="jw" type="revolute"><pose relative_to="__model__">-1 0 0 0 0 0'
+               "</pose><parent>world</parent><child>d</child><axis><xyz>0 0 1</xyz></axis>"
+               "</joint>")
+    path = tmp_path / "zigzag.sdf"
+    path.write_text(f'<sdf version="1.7"><model name="zigzag">{links}{joints}</model></sdf>')
+    doc = import_model(path).document
+    assert [[lk["name"] for lk in ch["links"]] for ch in doc["chains"]] == [["a", "b", "c"], ["d"]]
+    assert [c["name"] for c in doc["closures"]] == ["jd"]
+    assert "assemble" not in doc

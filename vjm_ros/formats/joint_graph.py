@@ -42,6 +42,9 @@ PARALLEL_TOLERANCE = 1e-6
 perpendicular): a file's axes are written to 6-17 digits, and a larger tilt is a 3-D model."""
 SEARCH_BUDGET = 20_000
 """Largest number of steps of the search for chains before the model is refused."""
+MAX_COVERS = 64
+"""Largest number of covers by chains tried for link frames (step 4) before the model is
+refused with the first one's reason."""
 
 
 class _Reducer(SceneWriter):
@@ -205,9 +208,11 @@ class _Reducer(SceneWriter):
         for k in moves:
             moves[k].sort(key=lambda m: m[0])
         self.moves = moves
-        self.steps = 0
+        self.steps, self.covers, self.frame_error = 0, 0, None
         self.best: set[str] = set()
         found = self._search([], set(), None)
+        if found is None and self.frame_error is not None:
+            raise self.frame_error
         if found is None and self.steps <= SEARCH_BUDGET:
             self.sign_refusal(moves)
         if found is None:
@@ -220,7 +225,6 @@ class _Reducer(SceneWriter):
                             "a link reached by a chain from the ground through its own joints "
                             "(close the branch with a loop joint, or weld it to its parent)",
                             f"link '{name}' {why}")
-        self.chain_list = found
 
     def sign_refusal(self, moves: dict) -> None:
         """Refuse naming the joint whose axis sign is what leaves no chains, if it is one."""
@@ -235,7 +239,7 @@ class _Reducer(SceneWriter):
         for k in self.moves:
             self.moves[k].sort(key=lambda m: m[0])
         self.steps, best = 0, self.best
-        found = self._search([], set(), None)
+        found = self._search([], set(), None, place=False)
         self.moves, self.best = signed, best
         if found is None:
             return
@@ -248,14 +252,25 @@ class _Reducer(SceneWriter):
                         "it): the scene's coordinate would be minus the file's position",
                         f"the opposite axis {_vec(j.axis)}")
 
-    def _search(self, chains: list, covered: set, end: str | None):
+    def _search(self, chains: list, covered: set, end: str | None, place: bool = True):
+        """A cover of the links by chains from ground (depth first), whose link frames can be
+        placed (step 4) when ``place``; None when there is none within the budgets."""
         self.steps += 1
         if len(covered) > len(self.best):
             self.best = set(covered)
-        if self.steps > SEARCH_BUDGET:
+        if self.steps > SEARCH_BUDGET or self.covers >= MAX_COVERS:
             return None
         if len(covered) == len(self.links):
-            return [list(c) for c in chains]
+            cover = [list(c) for c in chains]
+            if not place:
+                return cover
+            try:
+                self.place(cover)
+            except SceneError as exc:  # another cover may place them: keep looking
+                self.covers += 1
+                self.frame_error = self.frame_error or exc
+                return None
+            return cover
         options = []
         if end is not None:
             options += [(m, False) for m in self.moves[end] if m[1] not in covered]
@@ -267,14 +282,14 @@ class _Reducer(SceneWriter):
                 chains.append([])
             chains[-1].append((j, forward, dst))
             covered.add(dst)
-            out = self._search(chains, covered, dst)
+            out = self._search(chains, covered, dst, place)
             if out is not None:
                 return out
             covered.discard(dst)
             chains[-1].pop()
             if new_chain:
                 chains.pop()
-            if self.steps > SEARCH_BUDGET:
+            if self.steps > SEARCH_BUDGET or self.covers >= MAX_COVERS:
                 return None
         return None
 
@@ -372,15 +387,20 @@ class _Reducer(SceneWriter):
                 self.chains()
             except SceneError:
                 raise first from None
+
+    def place(self, cover: list) -> None:
+        """Step 4 for one cover: closures, link frames and lengths (a SceneError if a link's
+        next joint lies behind it)."""
+        self.chain_list = cover
         self.frame = {}
-        in_chain = {j.name for ch in self.chain_list for j, _, _ in ch}
+        in_chain = {j.name for ch in cover for j, _, _ in ch}
         self.closure_joints = [j for j in self.edges if j.name not in in_chain]
         self.anchors = {k: [] for k in self.links}
         for j in self.closure_joints:
             for body, p in ((j.parent, j.point), (j.child, j.child_point)):
                 if self.group_of[body] != WORLD:
                     self.anchors[self.group_of[body]].append(self.flat(p))
-        self.chain_docs = [self.chain_frames(ch) for ch in self.chain_list]
+        self.chain_docs = [self.chain_frames(ch) for ch in cover]
 
 def reduce_graph(graph: JointGraph, actuate: tuple[str, ...] = ()) -> dict:
     """The scene document of ``graph``, with actuators on the joints named in ``actuate``.
