@@ -33,11 +33,14 @@ class ImportedModel:
         The document as scene YAML.
     ignored : list of str
         What the file holds that the scene does not represent.
+    scene : Scene
+        The scene built from the document.
     """
 
     document: dict
     text: str
     ignored: list
+    scene: Scene
 
 
 def _reader(path: str):
@@ -89,7 +92,8 @@ def import_model(path: str | Path, actuate: tuple[str, ...] = ()) -> ImportedMod
         doc["provenance"] += ("\nThe file's pose does not close the loops within the scene "
                               "tolerance: the start is assembled.")
         text = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-    return ImportedModel(doc, text, list(dict.fromkeys(graph.ignored)))
+        scene = SceneBuilder(path, text).build(doc)
+    return ImportedModel(doc, text, list(dict.fromkeys(graph.ignored)), scene)
 
 
 def _build(path: str, doc: dict, text: str) -> Scene | None:
@@ -115,5 +119,4 @@ def load_model_scene(path: str | Path) -> Scene:
     SceneError
         As :func:`import_model`.
     """
-    imported = import_model(path)
-    return SceneBuilder(str(path), imported.text).build(imported.document)
+    return import_model(path).scene
