@@ -188,3 +188,32 @@ def test_another_cut_of_the_loop_when_a_link_would_point_away_from_its_next_join
     assert [[lk["name"] for lk in ch["links"]] for ch in doc["chains"]] == [["a", "b", "c"], ["d"]]
     assert [c["name"] for c in doc["closures"]] == ["jd"]
     assert "assemble" not in doc
+
+
+REFUSED = {
+    "axis.sdf": (_sdf(J1 + '<joint name="j2" type="revolute"><parent>a</parent><child>b</child>'
+                      "<axis><xyz>1 0 0</xyz></axis></joint>\n"), "parallel"),
+    "ball.sdf": (_sdf(J1 + '<joint name="j2" type="ball"><parent>a</parent><child>b</child>'
+                      "</joint>\n"), "ball"),
+    "floating.sdf": (_sdf(J1), "floating"),
+    "loop.urdf": ('<robot name="r"><link name="base"/><link name="a"><inertial><mass value="1"/>'
+                  '<inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link>'
+                  '<joint name="ja" type="continuous"><parent link="base"/><child link="a"/>'
+                  '<axis xyz="0 0 1"/></joint><gazebo><joint name="loop" type="universal">'
+                  "<parent>a</parent><child>base</child></joint></gazebo></robot>", "universal"),
+    "free.xml": ('<mujoco><worldbody><body name="b"><freejoint name="f"/><geom size="0.1"/>'
+                 "</body></worldbody></mujoco>", "floating base"),
+    "malformed.xml": ("<mujoco>\n  <worldbody>\n</mujoco>\n", "line 3, column 3"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REFUSED))
+def test_vjm_import_refuses_with_exit_2_naming_why(tmp_path, capsys, name):
+    from vjm_ros.app.cli import main
+
+    text, why = REFUSED[name]
+    path = tmp_path / name
+    path.write_text(text)
+    assert main(["import", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and why in err, err
