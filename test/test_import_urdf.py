@@ -22,6 +22,7 @@ from model_runs import MODELS, run
 from vjm_ros.core.errors import SceneError
 from vjm_ros.formats.importing import import_model
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 ROUND_OFF = 1e-10
 """rad or m: two runs of one mechanism in different link frames agree to round-off amplified
@@ -150,3 +151,36 @@ def test_a_pose_that_does_not_close_is_assembled(tmp_path):
     assert imported.scene.assembly_residual <= 1e-10
     q0 = imported.scene.model.initial_state()[0]
     assert 0 < np.max(np.abs(q0)) < 0.01  # moved a little from the file's pose, rad or m
+
+
+@pytest.mark.parametrize("name, basis", [
+    ("four_bar.urdf", ((1, 0, 0), (0, 1, 0))),  # N = +z: e1 = x, e2 = y
+    ("slider_crank.urdf", ((1, 0, 0), (0, 0, 1))),  # N = -y: e2 = z against gravity, e1 = x
+])
+def test_coordinates_are_the_files_joint_positions_for_yourdfpy(name, basis):
+    """Along the imported scene's motion, the scene's joint coordinates given to yourdfpy (a
+    maintained URDF library) as the file's joint positions place every link's frame where the
+    scene's link starts (the joint in front of it): the same pose, 1e-12 m (round-off of two
+    forward kinematics)."""
+    import yourdfpy
+
+    scene = load_scene(MODELS / name)
+    urdf = yourdfpy.URDF.load(str(MODELS / name), load_meshes=False,
+                              build_collision_scene_graph=False)
+    sim = Simulator(scene.model, SimulationSettings(integrator="rk4", closure="exact"),
+                    scene.gains, scene.plant)
+    e = np.array(basis, dtype=float)
+    start = None
+    for tick in range(500):
+        sim.advance(np.array([0.5]))
+        if tick % 50:
+            continue
+        sample = sim.sample()
+        q = dict(zip(scene.model.joint_names, sample.q, strict=True))
+        start = q if start is None else start
+        urdf.update_cfg({j: q[j] for j in urdf.actuated_joint_names})
+        for i, link in enumerate(scene.model.links):
+            world = urdf.get_transform(link.name, "world" if "world" in urdf.link_map
+                                       else urdf.base_link)[:3, 3]
+            np.testing.assert_allclose(e @ world, sample.segments[i][0], rtol=0, atol=1e-12)
+    assert max(abs(q[j] - start[j]) for j in q) > 0.1  # it moved, rad or m
