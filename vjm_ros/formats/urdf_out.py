@@ -27,7 +27,9 @@ closure joint at the pose it loads a model in, so for Gazebo write the file with
 pose is the scene's (closed) initial state and a URDF position is ``q - q0``.
 
 A joint's viscous ``damping`` and Coulomb ``friction`` are its ``<dynamics>`` (URDF has no
-armature). Inertials: mass ``m_i`` at ``(p_i, q_i, 0)``, ``izz = I_i`` (centroidal, about z); ``ixx = iyy =
+armature); a revolute joint with a ``range`` (hard stops) is ``revolute`` with ``lower`` and
+``upper`` the range in the file's positions (a missing side ``UNBOUNDED``), a prismatic joint's
+range its bounds; a stop's restitution has no URDF element. Inertials: mass ``m_i`` at ``(p_i, q_i, 0)``, ``izz = I_i`` (centroidal, about z); ``ixx = iyy =
 I_i / 2``, the inertia of a thin lamina in the plane (perpendicular-axis theorem), which is valid
 (triangle inequality) and plays no part in planar motion. Links without mass get no
 ``<inertial>`` (URDF's default: massless).
@@ -303,7 +305,12 @@ def joint_origin(model: Model, i: int, offset: float = 0.0) -> tuple[np.ndarray,
 
 def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     joint = model.joints[i]
-    kind = "continuous" if joint.kind == REVOLUTE else "prismatic"
+    lo, hi = getattr(joint, "range", (-math.inf, math.inf))
+    bounded = math.isfinite(lo) or math.isfinite(hi)
+    if joint.kind == REVOLUTE:
+        kind = "revolute" if bounded else "continuous"
+    else:
+        kind = "prismatic"
     el = ET.Element("joint", name=joint.name, type=kind)
     ET.SubElement(el, "parent", link=_parent_name(model, i))
     ET.SubElement(el, "child", link=model.links[i].name)
@@ -311,8 +318,11 @@ def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     _origin(el, xyz, yaw)
     ET.SubElement(el, "axis", xyz=numbers(*axis))
     attrs = {"effort": number(effort), "velocity": number(UNBOUNDED)}
-    if kind == "prismatic":
-        attrs = {"lower": number(-UNBOUNDED), "upper": number(UNBOUNDED), **attrs}
+    if kind != "continuous":
+        # positions of this file: the coordinate less the zero pose's offset
+        lower = lo - offset if math.isfinite(lo) else -UNBOUNDED
+        upper = hi - offset if math.isfinite(hi) else UNBOUNDED
+        attrs = {"lower": number(lower), "upper": number(upper), **attrs}
     ET.SubElement(el, "limit", **attrs)
     damping, friction = (float(getattr(joint, k, 0.0)) for k in ("damping", "friction"))
     if damping or friction:
