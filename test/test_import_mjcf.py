@@ -67,13 +67,21 @@ def test_coordinates_are_mujocos_qpos_along_a_driven_motion(imported):
 @pytest.mark.parametrize("variant, closures", [
     ("sites", ["pin_joint"]),
     ("weld", ["pin_joint", "pin_joint_angle"]),
+    ("losses", ["pin_joint"]),
 ])
-def test_site_connect_and_weld_follow_mujoco(tmp_path, variant, closures):
+def test_site_connect_weld_and_joint_losses_follow_mujoco(tmp_path, variant, closures):
     """The pin written between two sites, or as a weld (which also locks the distal links'
-    relative angle: a four-bar whose coupler is the two distal links), against MuJoCo as
-    above (2e-6 rad)."""
+    relative angle: a four-bar whose coupler is the two distal links), or every joint with
+    damping and armature (the scene's joint keys of the same meaning), against MuJoCo as above
+    (2e-6 rad)."""
     text = (MODELS / "five_bar.xml").read_text()
-    if variant == "sites":
+    if variant == "losses":
+        text = text.replace('<joint type="hinge" axis="0 1 0"/>',
+                            '<joint type="hinge" axis="0 1 0" damping="0.05" armature="0.002"/>')
+        scene_joints = import_model_text(tmp_path, text)["chains"][0]["links"]
+        assert [lk["joint"]["damping"] for lk in scene_joints] == [0.05, 0.05]
+        assert [lk["joint"]["armature"] for lk in scene_joints] == [0.002, 0.002]
+    elif variant == "sites":
         text = text.replace('<geom fromto="0 0 0 0.5 0 0"/>\n      </body>',
                             '<geom fromto="0 0 0 0.5 0 0"/>\n        '
                             '<site name="pin_r" pos="0.5 0 0"/>\n      </body>')
@@ -128,6 +136,12 @@ def test_a_weld_at_an_explicit_relpose_from_a_keyframe_follows_mujoco(tmp_path):
     for k, joint in enumerate(JOINTS):
         assert np.ptp(qpos[:, k]) > 0.1
         np.testing.assert_allclose(ours["q"][joint], qpos[:, k], rtol=0, atol=2e-6)
+
+
+def import_model_text(tmp_path, text: str) -> dict:
+    path = tmp_path / "probe.xml"
+    path.write_text(text)
+    return import_model(path).document
 
 
 def test_masses_from_capsules_and_the_hand_written_five_bar(imported):

@@ -90,6 +90,9 @@ class GraphJoint:
         Joint position at the start, rad or m.
     velocity : float
         Joint rate at the start, rad/s or m/s.
+    damping, armature, friction : float
+        Viscous damping (N m s/rad or N s/m), reflected inertia (kg m^2 or kg) and Coulomb
+        friction bound (N m or N) of the joint.
     turn : ndarray, shape (3, 3), or None
         A fixed or prismatic constraint's rotation of the child relative to the parent, from
         the zero pose to where the constraint holds (None: the bodies' own ``turn``).
@@ -109,6 +112,9 @@ class GraphJoint:
     element: str = ""
     velocity: float = 0.0
     turn: np.ndarray | None = None
+    damping: float = 0.0
+    armature: float = 0.0
+    friction: float = 0.0
 
 
 @dataclass

@@ -139,8 +139,8 @@ class _MjcfReader:
             joints.append(self.joint(adr + num - 1, parent, self.body_name(b)))
         joints += self.equalities()
         ignored = ["collision and visual geometry (contacts)", "solver settings"]
-        if np.any(m.dof_damping) or np.any(m.dof_armature) or np.any(m.dof_frictionloss):
-            ignored.append("joint damping, armature and friction loss")
+        if np.any(m.jnt_limited):
+            ignored.append("joint ranges")
         return JointGraph(source=self.path, format="MJCF", name=self.name, bodies=bodies,
                           joints=joints, gravity=np.array(m.opt.gravity, dtype=float),
                           actuators=self.actuators(ignored), ignored=ignored)
@@ -155,7 +155,10 @@ class _MjcfReader:
                           child_point=p.copy(), axis=axis / np.linalg.norm(axis), role=TREE,
                           start=float(self.qpos_start[m.jnt_qposadr[i]]),
                           velocity=float(self.qvel_start[m.jnt_dofadr[i]]),
-                          element=f"joint '{name}'")
+                          element=f"joint '{name}'",
+                          damping=float(m.dof_damping[m.jnt_dofadr[i]]),
+                          armature=float(m.dof_armature[m.jnt_dofadr[i]]),
+                          friction=float(m.dof_frictionloss[m.jnt_dofadr[i]]))
 
     def to_zero(self, b: int, p_start: np.ndarray) -> np.ndarray:
         """A point of body ``b`` given at the start pose, where it is at the zero pose, (3,)."""

@@ -88,6 +88,9 @@ class SceneWriter:
                      "slide": plain(slide)}
             if j.velocity:
                 joint["velocity"] = plain(j.velocity)
+            for key in ("damping", "armature", "friction"):
+                if getattr(j, key):
+                    joint[key] = plain(getattr(j, key))
             links.append({
                 "name": scene_name(link), "length": plain(length), "mass": plain(mass),
                 "inertia": plain(inertia), "com": self.local(link, com), "joint": joint,
@@ -197,6 +200,10 @@ class SceneWriter:
         lines = [f"Imported by vjm import from {g.source} ({g.format}). Joint coordinates are "
                  "the file's joint positions; link frames are placed at the file's zero pose."]
         closing = [j.name for j in self.closure_joints]
+        lossy = [j.name for j in self.closure_joints if j.damping or j.armature or j.friction]
+        if lossy:
+            g.ignored.append("damping, armature and friction of the loop joints "
+                             + ", ".join(lossy))
         if closing:
             lines.append("Loop joints and constraints closed as closures: "
                          + ", ".join(closing) + ".")

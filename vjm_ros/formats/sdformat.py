@@ -240,9 +240,13 @@ class _ModelReader:
                                   if axis_el is not None else None,
                                   1, self.path, f"{where} <initial_position>", default=[0.0])[0])
         point = frame.position.copy()
+        losses = [float(numbers(axis_el.findtext(f"dynamics/{k}") if axis_el is not None
+                                else None, 1, self.path, f"{where} <dynamics><{k}>",
+                                default=[0.0])[0]) for k in ("damping", "friction")]
         return GraphJoint(name=name, kind=kind, parent=parent, child=child, point=point,
                           child_point=point.copy(), axis=axis, role=GRAPH, start=start,
-                          element=f"model '{self.name}' {where}")
+                          element=f"model '{self.name}' {where}", damping=losses[0],
+                          friction=losses[1])
 
     def axis(self, axis_el: ET.Element | None, frame: Pose, where: str) -> np.ndarray:
         """The unit axis of a joint in the model frame."""

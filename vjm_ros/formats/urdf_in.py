@@ -151,8 +151,6 @@ class _UrdfReader:
         joints += self.gazebo_joints()
         joints += self.constraints()
         ignored = ["collision and visual geometry"]
-        if any(j.dynamics is not None for j in self.robot.joints):
-            ignored.append("joint dynamics (damping, friction)")
         if any(j.limit is not None and j.limit.lower is not None for j in self.robot.joints):
             ignored.append("joint position and velocity limits")
         return JointGraph(source=self.path, format="URDF", name=self.name, bodies=bodies,
@@ -166,10 +164,13 @@ class _UrdfReader:
         pose = self.frame[j.child]
         axis = np.asarray(j.axis if j.axis is not None else [1.0, 0.0, 0.0], dtype=float)
         axis = pose.rotation @ (axis / np.linalg.norm(axis))
+        dyn = j.dynamics
         return GraphJoint(name=j.name, kind=URDF_KINDS[j.type], parent=self.end(j.parent),
                           child=self.end(j.child), point=pose.position.copy(),
                           child_point=pose.position.copy(), axis=axis, role=TREE,
-                          element=f"joint '{j.name}'")
+                          element=f"joint '{j.name}'",
+                          damping=float((dyn.damping if dyn is not None else 0.0) or 0.0),
+                          friction=float((dyn.friction if dyn is not None else 0.0) or 0.0))
 
     def link_frame(self, name: str, where: str) -> Pose:
         if name == WORLD and name not in self.frame:
