@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from vjm_ros.core.hub_linalg import hub_correction, hub_implicit_solve
-from vjm_ros.core.joint_friction import friction_efforts
+from vjm_ros.core.joint_efforts import joint_efforts, stop_impacts
 from vjm_ros.core.layout import (
     C_VX,
     C_VY,
@@ -45,10 +45,10 @@ from vjm_ros.core.layout import (
     P_BETA,
     P_GX,
     P_GY,
+    P_JOINT_EFFORTS,
     P_METHOD,
     P_PLANT,
     P_RCOND,
-    P_STICK,
     PENALTY,
     R_BIAS,
     R_FORCE,
@@ -225,7 +225,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
     """
     lint, lflt, cint, cflt, gains, par, blocks = model
     (kin, mm, bias, cm, crow, jac, points, lu, piv, minv_at, g, v, vec, rhs, corr, ks, vs, qi,
-     scratch, _, zero, touch, lay, wcols, column, impulse) = data
+     scratch, _, zero, touch, lay, wcols, column, impulse, stop) = data
     n = q0.shape[0]
     r = crow.shape[0]
     then_evaluate = op >= THEN_EVALUATE
@@ -288,7 +288,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
     total = 1 if single else steps * stages + (1 if then_evaluate else 0)
     # ks: stage accelerations, vs: stage velocities
     acc = out_a if single else scratch
-    friction = par[P_STICK] != 0.0 and not single
+    friction = par[P_JOINT_EFFORTS] != 0.0 and not single  # joint friction and stops
     if friction:
         impulse[n] = 0.0
     for it in range(total):
@@ -303,6 +303,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
             if friction and not last:
                 for j in range(n):
                     impulse[j] = 0.0  # chosen once this stage's accelerations are known
+                    stop[j] = 0.0
         else:
             cst = 1.0 if stage == 3 else 0.5
             for j in range(n):
@@ -326,7 +327,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
             for j in range(n):
                 s = tau[j] - bias[j]
                 if friction and not last:
-                    s = s + impulse[j]  # the step's friction efforts, held
+                    s = s + (impulse[j] + stop[j])  # the step's joint efforts, held
                 if not exact:
                     t = 0.0
                     for i in range(r):
@@ -420,9 +421,9 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
         if friction and not last and stage == 0:
             for j in range(n):
                 column[j] = qd[j]  # the rates at the start of the step
-            status = max(status, friction_efforts(
-                acc, qd, h, op == IMPLICIT_EULER, exact, lflt, par, mm, jac, vec[2], lu, piv,
-                minv_at, g, v, vec, rhs, corr, wcols, impulse, blocks, touch))
+            status = max(status, joint_efforts(
+                acc, q, qd, h, op == IMPLICIT_EULER, exact, lflt, par, mm, jac, vec[2], lu,
+                piv, minv_at, g, v, vec, rhs, corr, wcols, impulse, stop, blocks, touch))
         if op == IMPLICIT_EULER:
             for j in range(n):
                 qd[j] = acc[j]
@@ -447,10 +448,10 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
                         B16 * ks[0, j] + B13 * ks[1, j] + B13 * ks[2, j] + B16 * ks[3, j]
                     )
         if friction and not last and stage == stages - 1:
-            removed = 0.0  # the friction's work over the step, trapezoid in the rates
+            removed = 0.0  # the joint efforts' work over the step, trapezoid in the rates
             for j in range(n):
-                removed -= h * impulse[j] * 0.5 * (column[j] + qd[j])
-            impulse[n] += removed
+                removed -= h * (impulse[j] + stop[j]) * 0.5 * (column[j] + qd[j])
+            impulse[n] += removed + stop_impacts(q, qd, lflt, wcols)
     if friction and steps > 0 and h > 0.0:
         impulse[n] = impulse[n] / (h * steps)  # energy removed -> mean power over the call
     return status

@@ -7,14 +7,14 @@ columns of each array are named by the constants below.
 
 
 * ``lint`` int64 (n, 3): revolute flag, first-of-chain flag, index of the chain's first link;
-* ``lflt`` float64 (n, 19): base angle (rad), base origin x, y (m), predecessor length (m), locked
+* ``lflt`` float64 (n, 22): base angle (rad), base origin x, y (m), predecessor length (m), locked
   angle (rad), locked slide (m), mass (kg), inertia (kg m^2), mass-centre offsets ``p``, ``q`` (m),
   the joint's damping (N m s/rad or N s/m) and armature (kg m^2 or kg), then the loads on the
   link reduced to a world force ``(Fx, Fy)`` (N) at the link origin and a moment
   ``A cos(theta) + B sin(theta) + Tz`` (N m), with ``A = sum(s Fy - w Fx)`` and
   ``B = -sum(s Fx + w Fy)`` over the link's loads at local points ``(s, w)``, then the joint's
   Coulomb friction bound (N m or N) and the velocity scale of its smooth model (rad/s or m/s;
-  0: sticking friction, :mod:`vjm_ros.core.joint_friction`);
+  0: sticking friction, :mod:`vjm_ros.core.joint_efforts`);
 * ``cint`` int64 (k, 4): closure kind (:data:`HINGE`, :data:`SLIDER`, :data:`ANGLE`), link of
   ``Pa``, link of the target (``-1``: ground), first row;
 * ``cflt`` float64 (k, 7): local ``(s, w)`` of ``Pa`` and of the target (m), line direction,
@@ -23,7 +23,7 @@ columns of each array are named by the constants below.
 * ``par`` float64 (8,): method (0 penalty, 1 exact), Baumgarte ``alpha``, ``beta`` (1/s),
   ``rcond``, gravity ``gx``, ``gy`` (m/s^2), 1 when some joint has damping, armature or smooth
   friction or a link a load (0: the kernels skip those terms), 1 when some joint has sticking
-  friction (0: no friction impulses).
+  friction or a stop (0: no joint efforts are solved).
 
 Output buffers (fields of :class:`Data`; columns named by the ``K_*``, ``C_*`` and ``R_*``
 constants):
@@ -62,9 +62,10 @@ F_MASS, F_INERTIA, F_COM_P, F_COM_Q = 6, 7, 8, 9
 F_DAMPING, F_ARMATURE = 10, 11
 F_LOAD_FX, F_LOAD_FY, F_LOAD_A, F_LOAD_B, F_LOAD_TZ = 12, 13, 14, 15, 16
 F_FRICTION, F_FRICTION_SCALE = 17, 18
-N_LFLT = 19
+F_RANGE_LO, F_RANGE_HI, F_RESTITUTION = 19, 20, 21
+N_LFLT = 22
 # entries of par
-P_METHOD, P_ALPHA, P_BETA, P_RCOND, P_GX, P_GY, P_PLANT, P_STICK = 0, 1, 2, 3, 4, 5, 6, 7
+P_METHOD, P_ALPHA, P_BETA, P_RCOND, P_GX, P_GY, P_PLANT, P_JOINT_EFFORTS = 0, 1, 2, 3, 4, 5, 6, 7
 N_PAR = 8
 # columns of kin
 K_THETA, K_COS, K_SIN, K_OX, K_OY, K_OMEGA, K_VX, K_VY, K_AX, K_AY = range(10)
@@ -145,12 +146,14 @@ class Data(NamedTuple):
         write its scratch columns).
     wcols : ndarray, shape (n, n)
         Rows of the closed mechanism's inverse mass matrix for the joints with sticking friction
-        (:mod:`vjm_ros.core.joint_friction`).
+        (:mod:`vjm_ros.core.joint_efforts`).
     column : ndarray, shape (n,)
         The rates at the start of a step with friction.
     impulse : ndarray, shape (n + 1,)
         The friction effort of each joint over the last step (N m or N); at ``n``, the mean
-        power the friction took over the last call's steps (W).
+        power the friction and the stops took over the last call's steps (W).
+    stop : ndarray, shape (n,)
+        The effort of each joint's stops over the last step, N m or N.
     """
 
     kin: np.ndarray
@@ -179,6 +182,7 @@ class Data(NamedTuple):
     wcols: np.ndarray
     column: np.ndarray
     impulse: np.ndarray
+    stop: np.ndarray
 
 
 def output_shapes(model: PackedModel) -> tuple[tuple[int, ...], ...]:
@@ -214,7 +218,8 @@ def make_data(model: PackedModel, layout: np.ndarray | None = None) -> Data:
                 ks=np.zeros((4, n)), vs=np.zeros((4, n)), qi=np.empty(n), scratch=np.empty(n),
                 spare=np.empty(n), zero=np.zeros(n),
                 touch=np.zeros((r, max(len(blocks) - 1, 1)), dtype=np.int64), layout=lay,
-                wcols=np.zeros((n, n)), column=np.zeros(n), impulse=np.zeros(n + 1))
+                wcols=np.zeros((n, n)), column=np.zeros(n), impulse=np.zeros(n + 1),
+                stop=np.zeros(n))
 
 
 def as_arguments(value: PackedModel | Data) -> tuple:

@@ -211,7 +211,7 @@ class Mechanism:
     @property
     def friction_power(self) -> float:
         """Mean power the sticking joint friction took over the last call of a fixed-step
-        method, W (:mod:`vjm_ros.core.joint_friction`)."""
+        method, W (:mod:`vjm_ros.core.joint_efforts`)."""
         return float(self._data.impulse[self.n])
 
     @property

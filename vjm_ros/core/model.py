@@ -87,8 +87,12 @@ class Joint:
     friction : float
         Coulomb friction bound, N m or N (0: none).
     friction_scale : float
-        0 for sticking friction (:mod:`vjm_ros.core.joint_friction`), else the velocity scale
+        0 for sticking friction (:mod:`vjm_ros.core.joint_efforts`), else the velocity scale
         ``v_s`` (rad/s or m/s) of the smooth model ``-friction * tanh(rate / v_s)``.
+    range : tuple of float
+        Hard stops ``(lo, hi)`` of the coordinate, rad or m (infinite: none).
+    restitution : float
+        Rebound rate over impact rate at a stop, 0..1.
     """
 
     name: str
@@ -100,6 +104,8 @@ class Joint:
     armature: float = 0.0
     friction: float = 0.0
     friction_scale: float = 0.0
+    range: tuple[float, float] = (-float("inf"), float("inf"))
+    restitution: float = 0.0
 
     @property
     def position(self) -> float:
@@ -296,6 +302,9 @@ class Model:
     armature: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     friction: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     friction_scale: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    range_lo: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    range_hi: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    restitution: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
 
     @classmethod
     def build(
@@ -385,6 +394,9 @@ class Model:
         model.armature = np.array([j.armature for j in joints], dtype=float)
         model.friction = np.array([j.friction for j in joints], dtype=float)
         model.friction_scale = np.array([j.friction_scale for j in joints], dtype=float)
+        model.range_lo = np.array([j.range[0] for j in joints], dtype=float)
+        model.range_hi = np.array([j.range[1] for j in joints], dtype=float)
+        model.restitution = np.array([j.restitution for j in joints], dtype=float)
         return model
 
     @property
@@ -394,9 +406,11 @@ class Model:
                 or bool(np.any((self.friction > 0) & (self.friction_scale > 0))))
 
     @property
-    def has_stick_friction(self) -> bool:
-        """True when a joint has sticking Coulomb friction."""
-        return bool(np.any((self.friction > 0) & (self.friction_scale == 0)))
+    def has_joint_efforts(self) -> bool:
+        """True when a joint has sticking Coulomb friction or a stop
+        (:mod:`vjm_ros.core.joint_efforts`)."""
+        return bool(np.any((self.friction > 0) & (self.friction_scale == 0))
+                    or np.any(np.isfinite(self.range_lo)) or np.any(np.isfinite(self.range_hi)))
 
     # ------------------------------------------------------------------ names and lookups
     @property
@@ -450,11 +464,12 @@ class Model:
         return s
 
     def without_plant_terms(self) -> Model:
-        """This model without joint damping, armature, friction and loads (itself when it has
-        none)."""
-        if not (self.has_plant_terms or self.has_stick_friction):
+        """This model without joint damping, armature, friction, stops and loads (itself when it
+        has none)."""
+        if not (self.has_plant_terms or self.has_joint_efforts):
             return self
-        joints = tuple(replace(j, damping=0.0, armature=0.0, friction=0.0) for j in self.joints)
+        joints = tuple(replace(j, damping=0.0, armature=0.0, friction=0.0,
+                               range=(-float("inf"), float("inf"))) for j in self.joints)
         return Model.build(self.name, self.chains, self.links, joints, self.closures,
                            self.actuators, self.points, tuple(self.gravity), self.source_text,
                            self.extras)

@@ -45,10 +45,10 @@ def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     -------
     lint : ndarray of int64, shape (n, 3)
         Revolute flag, first-of-chain flag, index of the chain's first link.
-    lflt : ndarray, shape (n, 19)
+    lflt : ndarray, shape (n, 22)
         Base angle (rad), base origin (m), predecessor length (m), locked angle (rad) and slide
         (m), mass (kg), inertia (kg m^2), mass-centre offsets (m), damping, armature, the
-        link's loads reduced and the joint's friction (:mod:`vjm_ros.core.layout`).
+        link's loads reduced, the joint's friction and stops (:mod:`vjm_ros.core.layout`).
     cint : ndarray of int64, shape (k, 4)
         Closure kind code, link of ``Pa``, target link (``-1``: ground), first row.
     cflt : ndarray, shape (k, 7)
@@ -74,6 +74,9 @@ def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     lflt[:, layout.F_ARMATURE] = model.armature
     lflt[:, layout.F_FRICTION] = model.friction
     lflt[:, layout.F_FRICTION_SCALE] = model.friction_scale
+    lflt[:, layout.F_RANGE_LO] = model.range_lo
+    lflt[:, layout.F_RANGE_HI] = model.range_hi
+    lflt[:, layout.F_RESTITUTION] = model.restitution
     for load in model.loads:  # reduced per link (layout docstring)
         i, (s, w), (fx, fy) = load.point.link, load.point.local, load.force
         lflt[i, layout.F_LOAD_FX] += fx
@@ -113,7 +116,7 @@ def pack_method(
     par : ndarray, shape (8,)
         Method code (0 penalty, 1 exact), ``alpha``, ``beta`` (1/s), ``rcond``, gravity (m/s^2),
         whether the model has damping, armature, smooth friction or loads, and whether it has
-        sticking friction.
+        sticking friction or stops.
     """
     r = model.n_rows
     gains = np.zeros((r, 2))
@@ -129,7 +132,7 @@ def pack_method(
         par[layout.P_RCOND] = method.rcond
     par[layout.P_GX : layout.P_GY + 1] = np.asarray(model.gravity, dtype=float).reshape(2)
     par[layout.P_PLANT] = 1.0 if model.has_plant_terms else 0.0
-    par[layout.P_STICK] = 1.0 if model.has_stick_friction else 0.0
+    par[layout.P_JOINT_EFFORTS] = 1.0 if model.has_joint_efforts else 0.0
     return gains, par
 
 

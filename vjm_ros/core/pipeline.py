@@ -162,8 +162,8 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
             if lflt[j, layout.F_FRICTION_SCALE] > 0.0:
                 dissipation += lflt[j, layout.F_FRICTION] * math.tanh(
                     qd[j] / lflt[j, layout.F_FRICTION_SCALE]) * qd[j]
-    if par[layout.P_STICK] != 0.0:
-        dissipation += data[25][n]  # the friction impulses' mean power over the last tick
+    if par[layout.P_JOINT_EFFORTS] != 0.0:
+        dissipation += data[25][n]  # joint friction and stops: mean power over the last tick
     kinetic = kin[n, layout.K_PCOS]
     potential = kin[n, layout.K_PSIN]
     spring = kin[n, layout.K_SLIDE]

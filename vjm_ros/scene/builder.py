@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import re
 import reprlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -325,7 +325,8 @@ class SceneBuilder:
                 jkey = f"{lkey}.joint"
                 jt = self.mapping(jt, jkey, {"name", "type", "angle", "slide", "velocity",
                                              "damping", "armature", "friction",
-                                             "friction_model", "velocity_scale"})
+                                             "friction_model", "velocity_scale", "range",
+                                             "restitution"})
                 jname = self.name(jt.get("name", f"{cname}_joint{i + 1}"), f"{jkey}.name")
                 if jname in joint_names:
                     raise self.fail(f"{jkey}.name", "a joint name used once in the scene", jname)
@@ -342,8 +343,9 @@ class SceneBuilder:
                 damping, armature, friction = (
                     self.number(jt.get(k, 0.0), f"{jkey}.{k}", minimum=0.0)
                     for k in ("damping", "armature", "friction"))
-                joints.append(Joint(jname, kind, absolute - prev_angle, slide, rate, damping,
-                                    armature, friction, self.friction_scale(jt, jkey)))
+                joint = Joint(jname, kind, absolute - prev_angle, slide, rate, damping,
+                              armature, friction, self.friction_scale(jt, jkey))
+                joints.append(self.stops(joint, jt, jkey))
                 links.append(Link(lname, c, length, mass, inertia, com))
                 self.link_key.append(lkey)
                 idx.append(len(links) - 1)
@@ -369,6 +371,28 @@ class SceneBuilder:
         if not value > 0:
             raise self.fail(f"{key}.velocity_scale", "a positive rate", scale)
         return value
+
+    def stops(self, joint: Joint, doc: dict, key: str) -> Joint:
+        """``joint`` with its ``range: [lo, hi]`` (the file's angle unit, or m) and
+        ``restitution`` (0..1); the start must lie within the range."""
+        if "range" not in doc:
+            if "restitution" in doc:
+                raise self.fail(f"{key}.restitution", "a restitution only with a range",
+                                doc["restitution"])
+            return joint
+        bounds = self.sequence(doc["range"], f"{key}.range", min_len=2, max_len=2)
+        read = self.angle if joint.kind == "revolute" else self.number
+        lo, hi = (read(b, f"{key}.range[{i}]") for i, b in enumerate(bounds))
+        if not lo < hi:
+            raise self.fail(f"{key}.range", "[lo, hi] with lo < hi", doc["range"])
+        if not lo <= joint.position <= hi:
+            start = joint.position / (self.angle_scale if joint.kind == "revolute" else 1.0)
+            raise self.fail(f"{key}.range", f"a range that holds the joint's start ({start:.6g})",
+                            doc["range"])
+        e = self.number(doc.get("restitution", 0.0), f"{key}.restitution", minimum=0.0)
+        if e > 1.0:
+            raise self.fail(f"{key}.restitution", "a number in [0, 1]", doc["restitution"])
+        return replace(joint, range=(lo, hi), restitution=e)
 
     def link_ref(self, value, key: str) -> int:
         """Index of the link named ``value``."""

@@ -613,7 +613,7 @@ class Simulator:
             terms = terms[np.column_stack((np.ones(model.n, bool),
                                            model.friction_scale > 0)).reshape(-1)]
             dissipation = _sum_in_order(np.concatenate(([dissipation], terms)))
-        if model.has_stick_friction:  # the friction impulses' mean power over the last tick
+        if model.has_joint_efforts:  # joint friction and stops: mean power over the last tick
             dissipation += mech.friction_power
         sigma = np.nan
         if singular_values and model.n_rows:
