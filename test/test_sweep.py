@@ -82,6 +82,14 @@ def test_an_unreachable_scheduler_is_refused_before_any_run():
             pass
 
 
+def test_a_worker_address_is_refused_as_not_a_scheduler(engine):
+    worker = next(iter(engine.client.scheduler_info()["workers"]))
+    with pytest.raises(ConfigurationError, match=f"--cluster {worker}: expected a Dask "
+                                                 "scheduler, found Worker"):
+        with Engine(worker, timeout=5.0):
+            pass
+
+
 def test_unknown_scene_parameters_are_refused_before_any_run(engine, tmp_path):
     spec = parse_spec(SPEC.replace("zeta: [1.0]", "mass.knee: [1.0]"), "s.yaml")
     with pytest.raises(ConfigurationError, match="grid.mass.knee: expected a link of five_bar"):
