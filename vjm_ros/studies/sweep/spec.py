@@ -155,6 +155,13 @@ def check_value(source: str, where: str, key: str, value: object) -> object:
 
     ``where`` is the spec key that holds it (``grid.rate[1]``). The ranges are
     :meth:`SimulationSettings.validated`'s, so the messages are those of ``vjm run``.
+
+    Raises
+    ------
+    SpecError
+        A value of the wrong type.
+    ConfigurationError
+        A value out of range, with the message of ``vjm run`` after the file and the key.
     """
     if key in ("integrator", "closure", "kernel"):
         known = {"integrator": list(INTEGRATORS), "closure": ["penalty", "exact"],
@@ -176,8 +183,9 @@ def check_value(source: str, where: str, key: str, value: object) -> object:
         try:  # the ranges of vjm run, with its messages
             SimulationSettings(**{key: value}).validated()
         except ConfigurationError as exc:
-            raise SpecError(source, where, str(exc).split("expected ", 1)[-1].split(", found")[0],
-                            value) from None
+            text = str(exc)
+            text = text[len(key) + 2:] if text.startswith(f"{key}: ") else text
+            raise ConfigurationError(f"{source}: {where}: {text}") from None
     return value
 
 
