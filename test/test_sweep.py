@@ -197,6 +197,8 @@ def test_runs_that_are_one_computation_run_once_and_say_so(engine, tmp_path):
                 assert cell(ran[m]) == rows[first][m], (case.settings, m, why)
 
 
+@pytest.mark.slow  # ~7 s: kernels no other test here compiles (every row of every example is
+# checked in the default suite by test_sweep_checks.py)
 def test_every_example_spec_runs(engine, tmp_path):
     for path in sorted((ROOT / "examples").glob("*.yaml")):
         spec = load_spec(path)
