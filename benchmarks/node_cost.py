@@ -35,8 +35,9 @@ import numpy as np
 from benchmarks import ROOT
 from benchmarks.latency import node_command, run_node
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 RATE = 1000.0
 

@@ -162,8 +162,9 @@ def stages(scene: str) -> tuple[dict[str, float], int]:
     import vjm_ros.logs.storage  # noqa: F401
     from vjm_ros.jit import deferred
     from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.samples import SampleBlock
     from vjm_ros.sim.settings import resolve_settings
-    from vjm_ros.sim.simulator import SampleBlock, Simulator
+    from vjm_ros.sim.simulator import Simulator
     from vjm_ros.sim.trajectory import Trajectory
 
     t = lap("import", t)

@@ -19,7 +19,8 @@ import pytest
 from vjm_ros.core.compiled import HAVE_NUMBA
 from vjm_ros.jit import tiers
 from vjm_ros.scene.loader import builtin_scene_text, parse_scene
-from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
+from vjm_ros.sim.samples import SampleBlock
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 pytestmark = [
     pytest.mark.bench,

@@ -16,8 +16,9 @@ import pytest
 from vjm_ros.app import cli
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.scene.loader import parse_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 J = 1.0 / 12.0 + 0.25  # pivot inertia of a 1 m, 1 kg uniform rod, kg m^2
 RATE = 1000.0

@@ -204,7 +204,8 @@ def test_five_bar_start_falls_back_to_the_dense_solve():
 _NO_ALLOCATION = """
 from numba.core.runtime import rtsys
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.scene.generated import star_scene
 sc = star_scene(6)
 for integ, closure in (("rk4", "exact"), ("implicit_euler", "penalty")):

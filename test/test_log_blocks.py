@@ -21,8 +21,9 @@ from vjm_ros.logs import mcap_recorder
 from vjm_ros.logs.mcap_recorder import McapRecorder
 from vjm_ros.logs.rerun_recorder import RerunRecorder
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 LOCKED_CRANK = """  - name: crank_lock
     type: angle

@@ -20,7 +20,8 @@ from vjm_ros.logs.rows import LogRows
 from vjm_ros.realtime.commands import CommandBuffer
 from vjm_ros.realtime.loop import STOPPED, LoopOptions, TickLoop
 from vjm_ros.scene.loader import load_scene
-from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
+from vjm_ros.sim.samples import SampleBlock
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 
 class Clock:

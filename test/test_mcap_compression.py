@@ -30,8 +30,9 @@ from vjm_ros.logs import mcap_block, mcap_recorder
 from vjm_ros.logs.mcap_block import BlockWriter
 from vjm_ros.logs.mcap_recorder import McapRecorder
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 
 @pytest.fixture(scope="module")

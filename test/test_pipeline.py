@@ -16,8 +16,9 @@ from conftest import FIXED_STEP_SETTINGS
 from vjm_ros.core.errors import DivergenceError
 from vjm_ros.scene.generated import star_scene
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 from vjm_ros.sim.trajectory import Trajectory
 
 pytest.importorskip("numba")
@@ -192,7 +193,8 @@ _NO_ALLOCATION = """
 from numba.core.runtime import rtsys
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
+from vjm_ros.sim.samples import SampleBlock
 sc = load_scene("three_chain")
 for integ, closure in (("rk4", "exact"), ("semi_implicit_euler", "penalty"),
                        ("implicit_euler", "penalty")):

@@ -45,7 +45,7 @@ from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.node import SimNode, run  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 from vjm_ros.scene.loader import load_scene  # noqa: E402
-from vjm_ros.sim.simulator import SimulationSettings, Simulator  # noqa: E402
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
 pytestmark = pytest.mark.ros
 

@@ -20,7 +20,7 @@ from test_ros_node import NODE, Harness, stamps_ns, wait_for  # noqa: E402
 
 from vjm_ros.scene.loader import load_scene  # noqa: E402
 from vjm_ros.sim.settings import SimulationSettings  # noqa: E402
-from vjm_ros.sim.simulator import Simulator  # noqa: E402
+from vjm_ros.sim.simulator import Simulator
 
 pytestmark = pytest.mark.ros
 

@@ -13,8 +13,9 @@ import numpy as np
 
 from vjm_ros.realtime.row_sample import RowSample
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 
 def test_refreshed_row_equals_the_copied_sample_tick_after_tick():

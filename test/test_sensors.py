@@ -15,8 +15,9 @@ import pytest
 
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.scene.loader import parse_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 DEG = math.pi / 180.0
 

@@ -159,8 +159,9 @@ def test_compiled_callers_pass_no_literal_arguments_to_the_kernel():
     a whole further copy of the kernel for that signature; the block pipeline passes names
     (``K.NO_ROW``), so every signature of step is of plain types."""
     from vjm_ros.scene.loader import load_scene
+    from vjm_ros.sim.samples import SampleBlock
     from vjm_ros.sim.settings import SimulationSettings
-    from vjm_ros.sim.simulator import SampleBlock, Simulator
+    from vjm_ros.sim.simulator import Simulator
 
     sc = load_scene("four_bar")
     sim = Simulator(sc.model, SimulationSettings(integrator="rk4", closure="exact",

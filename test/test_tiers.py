@@ -23,8 +23,9 @@ from vjm_ros.core import pipeline
 from vjm_ros.jit import tiers
 from vjm_ros.scene.generated import star_scene
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 
 pytest.importorskip("numba")
 

@@ -16,8 +16,9 @@ import pytest
 
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim import float_text, trajectory
+from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
-from vjm_ros.sim.simulator import SampleBlock, Simulator
+from vjm_ros.sim.simulator import Simulator
 from vjm_ros.sim.trajectory import Trajectory, csv_rows
 
 

@@ -285,7 +285,8 @@ def _cmd_run(args) -> int:
     preloading = preload_libraries(wanted) if wanted else None
     from vjm_ros.jit import tiers
     from vjm_ros.scene.loader import load_scene
-    from vjm_ros.sim.simulator import RUN_BLOCK_TICKS, Simulator
+    from vjm_ros.sim.samples import RUN_BLOCK_TICKS
+    from vjm_ros.sim.simulator import Simulator
     from vjm_ros.sim.trajectory import Trajectory
 
     scene = load_scene(args.scene)

@@ -38,7 +38,8 @@ def precompile(log=print) -> float:
 def _compile_all(log, start: float) -> None:
     from vjm_ros.app.cli import main
     from vjm_ros.scene.generated import star_scene
-    from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
+    from vjm_ros.sim.samples import SampleBlock
+    from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
     with tempfile.TemporaryDirectory() as scratch, contextlib.redirect_stdout(io.StringIO()):
         main(["run", "four_bar", "--duration", "0.002", "--out", str(Path(scratch) / "run")])

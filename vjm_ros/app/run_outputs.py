@@ -15,7 +15,7 @@ from pathlib import Path
 
 from vjm_ros.logs.background import BlockFanOut, Consumer
 from vjm_ros.logs.storage import LogWriters
-from vjm_ros.sim.simulator import Sample, SampleBlock
+from vjm_ros.sim.samples import Sample, SampleBlock
 from vjm_ros.sim.trajectory import CsvStream, Trajectory
 
 LIBRARIES = {

@@ -1,7 +1,7 @@
 """Logs of a simulation: MCAP (ROS 2 profile) and rerun recordings, usable without ROS.
 
 Both recorders share one API: ``write(sample)`` after every tick (or ``write_block(block)`` after
-a :class:`~vjm_ros.sim.simulator.SampleBlock` of ticks: the same log, encoded in bulk),
+a :class:`~vjm_ros.sim.samples.SampleBlock` of ticks: the same log, encoded in bulk),
 ``note_reset(t)`` when the simulator is reset, ``close()`` (idempotent) or use as a context
 manager::
 

@@ -20,7 +20,7 @@ bag_metadata` gives that document for a bag directory (``vjm run --bag``). rosba
 reader, rerun and Foxglove read every message, in time order.
 
 Blocks. :meth:`McapRecorder.write_block` logs a whole
-:class:`~vjm_ros.sim.simulator.SampleBlock` (``vjm run``), its messages built and indexed in
+:class:`~vjm_ros.sim.samples.SampleBlock` (``vjm run``), its messages built and indexed in
 bulk (:mod:`vjm_ros.logs.mcap_block`): the file is the one :meth:`McapRecorder.write` of each
 row writes, byte for byte.
 
@@ -264,7 +264,7 @@ class McapRecorder(Recorder):
 
     @atomic
     def write(self, sample) -> None:
-        """Log one tick's :class:`~vjm_ros.sim.simulator.Sample`."""
+        """Log one tick's :class:`~vjm_ros.sim.samples.Sample`."""
         self._check_open()
         ns = self.timebase.to_ns(sample.t)
         put = self._put
@@ -288,7 +288,7 @@ class McapRecorder(Recorder):
 
     @atomic
     def write_block(self, block) -> None:
-        """Log every row of a :class:`~vjm_ros.sim.simulator.SampleBlock`, encoded in bulk.
+        """Log every row of a :class:`~vjm_ros.sim.samples.SampleBlock`, encoded in bulk.
 
         The messages, their times, sequence numbers and order equal those of :meth:`write` of
         each row, and chunks close after the same ticks, except that the wall-time condition of

@@ -31,7 +31,7 @@ from vjm_ros.logs import rosbag2
 from vjm_ros.logs.mcap_recorder import BAG_METADATA, SCENE_ATTACHMENT, SETTINGS_METADATA
 from vjm_ros.logs.messages import ENERGY_LABELS, Topics
 from vjm_ros.scene.loader import parse_scene
-from vjm_ros.sim.simulator import Sample
+from vjm_ros.sim.samples import Sample
 
 
 # ---------------------------------------------------------------- reading

@@ -297,7 +297,7 @@ class RerunRecorder(Recorder):
     # ------------------------------------------------------------------ writing
     @atomic
     def write(self, sample) -> None:
-        """Buffer one tick's :class:`~vjm_ros.sim.simulator.Sample`; send when full or old."""
+        """Buffer one tick's :class:`~vjm_ros.sim.samples.Sample`; send when full or old."""
         self._check_open()
         ns = self.timebase.to_ns(sample.t)
         i = self._count
@@ -322,7 +322,7 @@ class RerunRecorder(Recorder):
 
     @atomic
     def write_block(self, block) -> None:
-        """Buffer every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` by array slices.
+        """Buffer every row of a :class:`~vjm_ros.sim.samples.SampleBlock` by array slices.
 
         Logs what :meth:`write` of each row would (the same buffers, sends and geometry), except
         that the wall-time condition of a send is checked once per block.

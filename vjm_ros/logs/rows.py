@@ -27,7 +27,7 @@ import numpy as np
 
 from vjm_ros.core.model import Model
 from vjm_ros.logs.background import BlockFanOut, Consumer
-from vjm_ros.sim.simulator import BLOCK_FIELDS, SampleBlock
+from vjm_ros.sim.samples import BLOCK_FIELDS, SampleBlock
 
 CAPACITY = 100
 """Rows per block: 0.1 s at 1 kHz. Per tick an MCAP log then costs about 7 µs (23 µs in blocks
@@ -47,7 +47,7 @@ class LogRows:
         The simulated model (the blocks' shapes).
     write_block : callable
         ``write_block(block)``: writes the rows of a
-        :class:`~vjm_ros.sim.simulator.SampleBlock` whose ``effort`` has one row per tick, shape
+        :class:`~vjm_ros.sim.samples.SampleBlock` whose ``effort`` has one row per tick, shape
         (capacity, n); must not keep references to the block's arrays. Called in the writing
         thread (or in :meth:`add`'s caller when ``background`` is False).
     capacity : int
@@ -99,7 +99,7 @@ class LogRows:
         return self.block.rows
 
     def add(self, sample) -> None:
-        """Copy one tick's :class:`~vjm_ros.sim.simulator.Sample` (geometry included) into the
+        """Copy one tick's :class:`~vjm_ros.sim.samples.Sample` (geometry included) into the
         block; hand the block over when it is full or its first row has waited ``max_wait``."""
         block = self.block
         i = block.rows

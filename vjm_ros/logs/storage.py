@@ -113,7 +113,7 @@ class LogWriters:
             self._give_up(rec, exc)
 
     def write_block(self, block) -> None:
-        """Write every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` to every working
+        """Write every row of a :class:`~vjm_ros.sim.samples.SampleBlock` to every working
         recorder: in bulk where the recorder has ``write_block``, else sample by sample."""
         for rec in list(self.active):
             self.write_block_to(rec, block)

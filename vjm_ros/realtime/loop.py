@@ -46,7 +46,8 @@ from vjm_ros.realtime.loop_io import LoopOptions, Outputs, Recorder
 from vjm_ros.realtime.monitor import Monitor
 from vjm_ros.realtime.pacing import Pacer
 from vjm_ros.realtime.row_sample import RowSample
-from vjm_ros.sim.simulator import Sample, SampleBlock, Simulator
+from vjm_ros.sim.samples import Sample, SampleBlock
+from vjm_ros.sim.simulator import Simulator
 
 WAIT_SLICE = 0.05
 """Longest uninterrupted wait of the loop, s (how soon it sees a request or a stop)."""

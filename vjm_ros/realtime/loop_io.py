@@ -12,7 +12,8 @@ from typing import Protocol
 
 import numpy as np
 
-from vjm_ros.sim.simulator import Sample, Simulator
+from vjm_ros.sim.samples import Sample
+from vjm_ros.sim.simulator import Simulator
 
 
 class Outputs(Protocol):

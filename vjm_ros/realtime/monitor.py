@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from vjm_ros.realtime.pacing import PacingStats
-from vjm_ros.sim.simulator import Sample
+from vjm_ros.sim.samples import Sample
 
 OK, WARN, ERROR = 0, 1, 2
 """Diagnostic levels (the values of ``diagnostic_msgs/DiagnosticStatus``)."""

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import math
 
-from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
+from vjm_ros.sim.samples import BLOCK_FIELDS, Sample, SampleBlock
 
 
 class RowSample:
-    """The first row of a :class:`~vjm_ros.sim.simulator.SampleBlock` as one reusable
-    :class:`~vjm_ros.sim.simulator.Sample` whose arrays are views of the block (no copies).
+    """The first row of a :class:`~vjm_ros.sim.samples.SampleBlock` as one reusable
+    :class:`~vjm_ros.sim.samples.Sample` whose arrays are views of the block (no copies).
 
     Parameters
     ----------

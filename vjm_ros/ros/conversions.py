@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayou
 from visualization_msgs.msg import Marker, MarkerArray
 
 from vjm_ros.logs import messages as layouts
-from vjm_ros.sim.simulator import Sample
+from vjm_ros.sim.samples import Sample
 
 FRAME_ID = layouts.FRAME_ID
 

@@ -117,7 +117,8 @@ from vjm_ros.ros.runtime import (
 from vjm_ros.ros.wire import MarkerWire, TickWire
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
-from vjm_ros.sim.simulator import Sample, Simulator
+from vjm_ros.sim.samples import Sample
+from vjm_ros.sim.simulator import Simulator
 
 NODE_NAME = "vjm_sim_node"
 EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3

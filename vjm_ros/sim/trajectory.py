@@ -20,19 +20,19 @@ from vjm_ros.core.model import ANGLE, Model
 from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
 from vjm_ros.jit import tiers
 from vjm_ros.sim import float_text
-from vjm_ros.sim.simulator import BLOCK_FIELDS, Sample, SampleBlock
+from vjm_ros.sim.samples import BLOCK_FIELDS, Sample, SampleBlock
 
 ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
 
 
 _STORED = ("q", "qd", "qdd", "theta", "points", "force", "error", "energy", "power",
            "dissipation", "segments")
-"""Arrays of a :class:`~vjm_ros.sim.simulator.SampleBlock` the trajectory keeps (all but the
+"""Arrays of a :class:`~vjm_ros.sim.samples.SampleBlock` the trajectory keeps (all but the
 closures' points of application), with the block's names."""
 
 _SAMPLE_FIELDS = (("t", "t"), ("effort", "effort")) + tuple(
     (key, attr) for key, attr in BLOCK_FIELDS if key in _STORED)
-"""Columns of the trajectory buffer and the :class:`~vjm_ros.sim.simulator.Sample` field each
+"""Columns of the trajectory buffer and the :class:`~vjm_ros.sim.samples.Sample` field each
 one takes."""
 
 
@@ -45,7 +45,7 @@ class Trajectory:
     capacity : int
         Initial number of rows reserved (grows as needed).
     measured : bool
-        Also keep the sensors' measurements (:attr:`~vjm_ros.sim.simulator.Sample.measured`)
+        Also keep the sensors' measurements (:attr:`~vjm_ros.sim.samples.Sample.measured`)
         and write them as the ``measured.*`` columns.
     """
 
@@ -77,7 +77,7 @@ class Trajectory:
         self._rows += 1
 
     def extend(self, block: SampleBlock) -> None:
-        """Store every row of a :class:`~vjm_ros.sim.simulator.SampleBlock` (copied; the block's
+        """Store every row of a :class:`~vjm_ros.sim.samples.SampleBlock` (copied; the block's
         arrays carry the trajectory's column names)."""
         rows = len(block)
         self._reserve(rows)

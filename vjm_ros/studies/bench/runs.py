@@ -17,7 +17,8 @@ from vjm_ros.core.errors import (
 from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.scene.loader import Scene
-from vjm_ros.sim.simulator import RUN_BLOCK_TICKS, SampleBlock, SimulationSettings, Simulator
+from vjm_ros.sim.samples import RUN_BLOCK_TICKS, SampleBlock
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 from vjm_ros.sim.trajectory import Trajectory
 from vjm_ros.studies.bench.grid import (
     CHECK_SETTINGS,
@@ -66,7 +67,7 @@ def _positions(model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 BLOCK_TICKS = RUN_BLOCK_TICKS
 """Ticks per call when a row is run or timed: a whole-run cost, as ``vjm run`` pays it
-(:data:`vjm_ros.sim.simulator.RUN_BLOCK_TICKS`)."""
+(:data:`vjm_ros.sim.samples.RUN_BLOCK_TICKS`)."""
 
 
 def _efforts(scene: Scene) -> np.ndarray:

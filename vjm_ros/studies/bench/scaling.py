@@ -14,7 +14,8 @@ from vjm_ros.core.errors import (
 )
 from vjm_ros.scene.generated import chain_scene, star_scene
 from vjm_ros.scene.loader import Scene
-from vjm_ros.sim.simulator import SampleBlock, SimulationSettings, Simulator
+from vjm_ros.sim.samples import SampleBlock
+from vjm_ros.sim.simulator import SimulationSettings, Simulator
 from vjm_ros.studies.bench.grid import (
     MAX_SCALING_TICKS,
     Grid,
