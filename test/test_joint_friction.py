@@ -251,3 +251,31 @@ def test_a_stop_inside_a_closed_chain_holds_and_the_closures_recover():
     # opens by the second-order rest, (8.5e-3)^2 = 7e-5 times second derivatives of the pin's
     # position of a few m (measured 2.3e-4 m; without W's row it was 7e-3 m)
     assert max(s.closure_error.max() for s in samples) < 1e-3
+
+
+def test_controller_model_compensates_coulomb_friction_on_request():
+    """With ``plant_terms=True`` the rod's inverse dynamics adds ``mu tanh(qd / 0.01)``
+    (the sticking friction made smooth for the controller), and nothing without it."""
+    from vjm_ros.control.closed_model import FRICTION_COMPENSATION_SCALE, ClosedChainModel
+
+    model = parse_scene(ROD % (-0.3, "friction: 0.6, range: [-2.0, 2.0]")
+                        + "actuators:\n  - {joint: pivot}\n").model
+    q, qd, udd = np.array([-0.3]), np.array([0.004]), np.array([2.5])
+    ideal = ClosedChainModel(model).inverse_dynamics(q, qd, udd)[0]
+    full = ClosedChainModel(model, plant_terms=True).inverse_dynamics(q, qd, udd)[0]
+    inertia = 1.0 / 12.0 + 0.25
+    assert ideal == pytest.approx(inertia * udd[0] + MGP * np.cos(q[0]), rel=1e-12)
+    assert full - ideal == pytest.approx(0.6 * np.tanh(qd[0] / FRICTION_COMPENSATION_SCALE),
+                                         rel=1e-12)
+
+
+def test_adaptive_integrators_refuse_sticking_friction_and_stops():
+    """Friction and stops act once per fixed step: an adaptive solve would leave them out."""
+    from vjm_ros.core.errors import ConfigurationError
+
+    for keys in ("friction: 0.5", "range: [-2.0, 2.0]"):
+        scene = parse_scene(ROD % (0.0, keys))
+        with pytest.raises(ConfigurationError, match="integrator: expected a fixed-step"):
+            Simulator(scene.model, SimulationSettings(integrator="rk45"), {})
+    smooth = parse_scene(ROD % (0.0, "friction: 0.5, friction_model: smooth, velocity_scale: 0.1"))
+    Simulator(smooth.model, SimulationSettings(integrator="rk45"), {})  # smooth: a force

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +81,11 @@ times this rate. Measured over 5 s of free fall at 1 kHz (``vjm run``, rk4), the
 three_chain and five_bar (exact closure on five_bar: ``|C|`` <= 2.5e-8 m, ``|A qd|`` <= 9.5e-7 m/s
 at up to 70 rad/s); 1e3 leaves a factor of ten over those, while rates off the closures by a
 user's mistake (one joint's rate forgotten) are ~0.1-1 m/s."""
+FRICTION_COMPENSATION_SCALE = 0.01
+"""Velocity scale of the Coulomb-friction compensation of :class:`ClosedChainModel` with
+``plant_terms=True``: a joint with sticking friction ``mu`` is compensated by
+``mu tanh(rate / 0.01)`` (rad/s or m/s), ``mu sign(rate)`` but continuous through rest."""
+
 TASK_SINGULAR_TOLERANCE = 1e-9
 """Smallest singular value of a point's task Jacobian ``J_t = J S``, relative to the largest it
 can have, ``|J|_2 |S|_2`` (m per rad or per m), below which the point's acceleration cannot be
@@ -129,6 +134,18 @@ class ReducedDynamics:
     preload_direction: np.ndarray | None = None
 
 
+def _compensated(model: Model) -> Model:
+    """``model`` with its sticking friction made smooth (:data:`FRICTION_COMPENSATION_SCALE`)
+    and without stops: the terms a controller's inverse dynamics can compensate."""
+    joints = tuple(
+        replace(j, range=(-math.inf, math.inf),
+                friction_scale=j.friction_scale or FRICTION_COMPENSATION_SCALE)
+        for j in model.joints)
+    return Model.build(model.name, model.chains, model.links, joints, model.closures,
+                       model.actuators, model.points, tuple(model.gravity), model.source_text,
+                       model.extras, model.loads)
+
+
 class ClosedChainModel:
     """A scene's closed mechanism, for controllers (no ROS).
 
@@ -147,8 +164,10 @@ class ClosedChainModel:
         default ``closure_tolerance * CLOSURE_RATE`` (1e-3 m/s with the default closure
         tolerance; a penalty-closed simulator's rates are off by up to ~0.2 m/s).
     plant_terms : bool
-        Whether the dynamics include the scene's joint damping, armature and constant loads
-        (their compensation in the inverse dynamics); default False, the ideal mechanism.
+        Whether the dynamics include the scene's joint damping, armature, friction and constant
+        loads (their compensation in the inverse dynamics; sticking friction as the smooth
+        ``mu tanh(rate / FRICTION_COMPENSATION_SCALE)``, stops left out); default False, the
+        ideal mechanism.
 
     Raises
     ------
@@ -159,7 +178,7 @@ class ClosedChainModel:
     def __init__(self, model: Model, independent: Sequence[str] | None = None,
                  closure_tolerance: float = CLOSURE_TOLERANCE,
                  velocity_tolerance: float | None = None, plant_terms: bool = False) -> None:
-        model = model if plant_terms else model.without_plant_terms()
+        model = _compensated(model) if plant_terms else model.without_plant_terms()
         self.model = model
         self.closure_tolerance = _tolerance(closure_tolerance, "closure_tolerance", "m or rad")
         self.velocity_tolerance = (

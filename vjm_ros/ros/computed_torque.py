@@ -20,7 +20,9 @@ path over after a reset. Run it beside ``vjm_sim_node``::
 Parameters: ``scene`` (fallback model), ``simulator`` (name), ``path`` (``circle`` or
 ``figure8``), ``size`` (radius or half-width, m), ``period`` (s), ``approach_time`` (s), ``kp``
 (1/s^2), ``kd`` (1/s), ``preload`` (N m or N), ``point`` (named point; first by default),
-``description_timeout`` (s), ``closure_tolerance`` (m: closures of the measured state).
+``description_timeout`` (s), ``closure_tolerance`` (m: closures of the measured state),
+``compensate_plant`` (compensate the scene's joint damping, armature, friction and loads in the
+inverse dynamics: :class:`~vjm_ros.control.closed_model.ClosedChainModel` ``plant_terms``).
 """
 
 from __future__ import annotations
@@ -48,12 +50,14 @@ class ComputedTorqueNode(ControllerNode):
             "scene": "", "simulator": "vjm_sim_node", "path": "circle", "size": 0.05,
             "period": 2.0, "approach_time": 1.0, "kp": 400.0, "kd": 40.0, "preload": 0.0,
             "point": "", "description_timeout": 10.0, "closure_tolerance": 1e-2,
+            "compensate_plant": False,
         }, context=context, parameter_overrides=parameter_overrides)
         p = self.params
         if p["path"] not in PATHS:
             raise ValueError(f"path: expected one of {sorted(PATHS)}, found {p['path']!r}")
         text = wait_for_scene_description(self, p["simulator"], p["description_timeout"])
-        kwargs = {"closure_tolerance": p["closure_tolerance"]}
+        kwargs = {"closure_tolerance": p["closure_tolerance"],
+                  "plant_terms": bool(p["compensate_plant"])}
         if text is not None:
             self.cm = ClosedChainModel.from_yaml(text, **kwargs)
             origin = f"{p['simulator']}/scene_description"

@@ -88,6 +88,12 @@ class Simulator:
             if self._adaptive()
             else make_integrator(self.settings.integrator)
         )
+        if self._adaptive() and model.has_joint_efforts:
+            raise ConfigurationError(
+                f"integrator: expected a fixed-step method for {model.name}, whose sticking "
+                f"friction and stops act once per step (explicit_euler, semi_implicit_euler, "
+                f"rk4, implicit_euler; smooth friction works with any), found "
+                f"{self.settings.integrator!r}")
         self.q0, self.qd0 = model.initial_state()
         self.selection = self.actuation.selection  # joint effort per unit of command
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
