@@ -41,7 +41,7 @@ from vjm_ros.core.constraints import ClosureRows, ClosureTerms, ExactClosure, Pe
 from vjm_ros.core.evaluation import DynamicsTerms, Evaluation, as_vector, unpack
 from vjm_ros.core.kinematics import Kinematics
 from vjm_ros.core.model import GROUND, HINGE, Closure, Model, PointRef
-from vjm_ros.core.packing import closure_layout, pack_method, pack_model
+from vjm_ros.core.packing import add_loads, closure_layout, pack_method, pack_model
 from vjm_ros.jit import tiers
 
 
@@ -87,6 +87,7 @@ class Mechanism:
         self, model: Model, method: PenaltyClosure | ExactClosure, warm_up: bool = True
     ):
         self._packed = pack_model(model, method)
+        self._external_loads: tuple = ()
         n, r = model.n, model.n_rows
         self._layout = closure_layout(model, self._packed.blocks)
         self._data = self.new_data()
@@ -128,7 +129,25 @@ class Mechanism:
     def method(self, value: PenaltyClosure | ExactClosure) -> None:
         self._method = value
         gains, par = pack_method(value, self.model)
+        if self._external_loads:
+            par[layout.P_PLANT] = 1.0
         self._packed = self._packed._replace(gains=gains, par=par)
+
+    @property
+    def external_loads(self) -> tuple:
+        """Loads applied besides the scene's own (:class:`~vjm_ros.core.model.Load`), e.g. a
+        wrench a user sends; assigning a tuple re-packs the links' loads for the kernel."""
+        return self._external_loads
+
+    @external_loads.setter
+    def external_loads(self, loads: tuple) -> None:
+        self._external_loads = tuple(loads)
+        lflt = self._packed.lflt.copy()
+        lflt[:, layout.F_LOAD_FX : layout.F_LOAD_TZ + 1] = 0.0
+        add_loads(lflt, self.model.loads + self._external_loads)
+        par = self._packed.par.copy()
+        par[layout.P_PLANT] = 1.0 if (self.model.has_plant_terms or self._external_loads) else 0.0
+        self._packed = self._packed._replace(lflt=lflt, par=par)
 
     @property
     def packed(self) -> layout.PackedModel:

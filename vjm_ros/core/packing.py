@@ -77,13 +77,7 @@ def pack_links(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     lflt[:, layout.F_RANGE_LO] = model.range_lo
     lflt[:, layout.F_RANGE_HI] = model.range_hi
     lflt[:, layout.F_RESTITUTION] = model.restitution
-    for load in model.loads:  # reduced per link (layout docstring)
-        i, (s, w), (fx, fy) = load.point.link, load.point.local, load.force
-        lflt[i, layout.F_LOAD_FX] += fx
-        lflt[i, layout.F_LOAD_FY] += fy
-        lflt[i, layout.F_LOAD_A] += s * fy - w * fx
-        lflt[i, layout.F_LOAD_B] -= s * fx + w * fy
-        lflt[i, layout.F_LOAD_TZ] += load.torque
+    add_loads(lflt, model.loads)
     k = len(model.closures)
     cint = np.zeros((k, 4), dtype=np.int64)
     cflt = np.zeros((k, 7))
@@ -134,6 +128,18 @@ def pack_method(
     par[layout.P_PLANT] = 1.0 if model.has_plant_terms else 0.0
     par[layout.P_JOINT_EFFORTS] = 1.0 if model.has_joint_efforts else 0.0
     return gains, par
+
+
+def add_loads(lflt: np.ndarray, loads) -> None:
+    """Add ``loads`` (:class:`~vjm_ros.core.model.Load`) to the load columns of ``lflt`` in
+    place, reduced per link (:mod:`vjm_ros.core.layout`)."""
+    for load in loads:
+        i, (s, w), (fx, fy) = load.point.link, load.point.local, load.force
+        lflt[i, layout.F_LOAD_FX] += fx
+        lflt[i, layout.F_LOAD_FY] += fy
+        lflt[i, layout.F_LOAD_A] += s * fy - w * fx
+        lflt[i, layout.F_LOAD_B] -= s * fx + w * fy
+        lflt[i, layout.F_LOAD_TZ] += load.torque
 
 
 def chain_blocks(model: Model) -> np.ndarray:

@@ -46,6 +46,7 @@ from vjm_ros.realtime.loop_io import LoopOptions, Outputs, Recorder
 from vjm_ros.realtime.monitor import Monitor
 from vjm_ros.realtime.pacing import Pacer
 from vjm_ros.realtime.row_sample import RowSample
+from vjm_ros.realtime.wrenches import WrenchBuffer
 from vjm_ros.sim.samples import Sample, SampleBlock
 from vjm_ros.sim.simulator import Simulator
 
@@ -96,6 +97,8 @@ class TickLoop:
         Monotonic wall time, s.
     sleep : callable
         ``sleep(seconds)``.
+    wrenches : WrenchBuffer, optional
+        External wrenches, latched at the start of each tick (:mod:`vjm_ros.realtime.wrenches`).
     """
 
     def __init__(
@@ -109,9 +112,11 @@ class TickLoop:
         paused: bool = False,
         clock: Callable[[], float] = time.perf_counter,
         sleep: Callable[[float], None] = time.sleep,
+        wrenches: WrenchBuffer | None = None,
     ):
         self.sim = simulator
         self.commands = commands
+        self.wrenches = wrenches
         self.outputs = outputs
         self.options = options or LoopOptions()
         self.logs = LogWriters(recorders, self._log_failed)
@@ -402,6 +407,10 @@ class TickLoop:
         sim, opts, outputs = self.sim, self.options, self.outputs
         if latched.fresh or latched.timed_out:
             sim.set_efforts(latched.efforts)
+        if self.wrenches is not None:
+            loads = self.wrenches.latch()
+            if loads is not None:  # a wrench arrived or timed out: from this tick on
+                sim.set_external_loads(loads)
         forces = (sim.ticks + 1) % opts.forces_every == 0
         now = self._clock()
         draw = opts.marker_period > 0 and now >= self._next_markers
@@ -492,6 +501,9 @@ class TickLoop:
             "command_timeouts": self.commands.timeouts,
             "lockstep_timeouts": self.lockstep_timeouts,
         }
+        if self.wrenches is not None:
+            counters["wrenches_accepted"] = self.wrenches.accepted
+            counters["wrenches_refused"] = self.wrenches.refused
         return self.monitor.report(self.time, self.pacer.stats, counters)
 
     def _idle(self) -> None:
@@ -526,12 +538,16 @@ class TickLoop:
             replacement, self._replacement = self._replacement, None
         if replacement is not None:
             self.sim, self.commands = replacement
+            if self.wrenches is not None:  # the new scene's points
+                self.wrenches = WrenchBuffer(self.sim.model.points, self.wrenches.timeout)
             self._load_kernels()
             self.pacer.period = self.sim.dt
             self.outputs.rebuilt(self.sim)
         else:
             self.sim.reset()
         self.commands.clear()
+        if self.wrenches is not None:
+            self.wrenches.clear()
         self.log_rows.sync()  # the ending episode's ticks are written before the reset is noted
         if replacement is not None:  # its model may differ in shape
             self.log_rows.close()

@@ -27,6 +27,7 @@ topic                           type                                      when
 ``robot_description`` (relative) ``std_msgs/String`` (transient local)    same: the scene's URDF
 ``~/effort_commands`` (in)      ``std_msgs/Float64MultiArray``            one value per actuator
 ``~/joint_commands`` (in)       ``sensor_msgs/JointState``                efforts by joint name
+``~/external_wrench`` (in)      ``geometry_msgs/WrenchStamped``           at a named point
 ==============================  ========================================  =========================
 
 A scene with ``sensors`` publishes on ``joint_states`` what its sensors measure, and the exact
@@ -71,10 +72,7 @@ import rclpy.logging
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import (
-    FloatingPointRange,
-    IntegerRange,
     ParameterDescriptor,
-    ParameterType,
     SetParametersResult,
 )
 from rclpy.executors import SingleThreadedExecutor
@@ -98,14 +96,15 @@ from vjm_ros.realtime.parameters import (
     RESET,
     START,
     NodeConfig,
-    ParamSpec,
     build_simulator,
     check_rates,
     ticks_between,
 )
+from vjm_ros.realtime.wrenches import WrenchBuffer
 from vjm_ros.ros import conversions as conv
 from vjm_ros.ros.clock_owner import CONFLICT, ClockOwner
 from vjm_ros.ros.command_wire import submit_effort_bytes, submit_joint_command_bytes
+from vjm_ros.ros.descriptors import descriptor
 from vjm_ros.ros.runtime import (
     PolledGroup,
     Spinner,
@@ -115,6 +114,7 @@ from vjm_ros.ros.runtime import (
     take_all,
 )
 from vjm_ros.ros.wire import MarkerWire, TickWire
+from vjm_ros.ros.wrench_input import subscribe_external_wrench
 from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.samples import Sample
@@ -131,41 +131,6 @@ WARNING_PERIOD = 1.0
 """Seconds between two warnings of one kind (bad commands, clamping, timeouts)."""
 NOTICE_LEVELS = {"command_timeout": "warning", "lockstep_timeout": "warning",
                  "log_failed": "warning", CONFLICT: "warning"}
-
-
-def descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    """ROS parameter descriptor of a :class:`~vjm_ros.realtime.parameters.ParamSpec`.
-
-    Floating-point parameters also accept integers (``-p rate_hz:=500``).
-    """
-    when = {
-        "now": "takes effect at the next tick",
-        RESET: "takes effect at the next ~/reset",
-        START: "read-only after start",
-    }[spec.applies]
-    d = ParameterDescriptor(
-        name=spec.name,
-        description=spec.description,
-        read_only=spec.applies == START,
-        additional_constraints=when,
-    )
-    if isinstance(spec.default, bool):
-        d.type = ParameterType.PARAMETER_BOOL
-    elif isinstance(spec.default, int):
-        d.type = ParameterType.PARAMETER_INTEGER
-        d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
-    elif isinstance(spec.default, float):
-        # Dynamic typing lets `-p duration:=5` (an integer) through; NodeConfig checks the type.
-        d.dynamic_typing = True
-        d.floating_point_range = [
-            FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
-        ]
-    else:
-        d.type = ParameterType.PARAMETER_STRING
-        if spec.choices:
-            shown = ", ".join(repr(c) for c in spec.choices)
-            d.additional_constraints = f"one of {shown}; {when}"
-    return d
 
 
 def open_recorders(
@@ -229,7 +194,9 @@ class SimNode(Node):
         self._wrench_pubs: dict[str, object] = {}
         self._adopt(sim.model)
         self.loop = TickLoop(sim, self._commands_for(sim), self, self._options(sim),
-                             recorders, paused=self.config.start_paused)
+                             recorders, paused=self.config.start_paused,
+                             wrenches=WrenchBuffer(sim.model.points, self.config.command_timeout))
+        subscribe_external_wrench(self, lambda: self.loop.wrenches, self._warn)
         self._publish_scene()
         polled = PolledGroup(lambda: self.loop.polls_inputs)
         self._polled = [

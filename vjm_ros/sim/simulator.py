@@ -12,7 +12,7 @@ from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
 from vjm_ros.core.kinematics import link_segments, point_positions
-from vjm_ros.core.model import Model
+from vjm_ros.core.model import Load, Model
 from vjm_ros.scene.plant import Plant
 from vjm_ros.sim.actuators import Actuation
 from vjm_ros.sim.history import StateHistory
@@ -188,6 +188,11 @@ class Simulator:
         if not self.actuation.dynamic:
             self.tau = self.selection @ e
         return e
+
+    def set_external_loads(self, loads: tuple[Load, ...]) -> None:
+        """Loads applied from the next tick on besides the scene's own (a user's wrench at a
+        named point; :class:`~vjm_ros.core.model.Load`); ``()`` removes them."""
+        self.mechanism.external_loads = tuple(loads)
 
     def advance(self, efforts: np.ndarray | None = None) -> None:
         """One control tick.
