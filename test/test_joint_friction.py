@@ -279,3 +279,21 @@ def test_adaptive_integrators_refuse_sticking_friction_and_stops():
             Simulator(scene.model, SimulationSettings(integrator="rk45"), {})
     smooth = parse_scene(ROD % (0.0, "friction: 0.5, friction_model: smooth, velocity_scale: 0.1"))
     Simulator(smooth.model, SimulationSettings(integrator="rk45"), {})  # smooth: a force
+
+
+def test_blocks_report_the_same_dissipation_as_ticks():
+    """The compiled block of ticks (vjm run, the node) reports the friction's and the stops'
+    power as the tick-by-tick path does: the same numbers."""
+    from vjm_ros.sim.samples import SampleBlock
+
+    scene = parse_scene(ROD % (0.0, f"range: [{STOP}, 3.0], restitution: 0.5, friction: 0.1"))
+    a = Simulator(scene.model, SimulationSettings(integrator="rk4", rate=1000.0), {})
+    b = Simulator(scene.model, SimulationSettings(integrator="rk4", rate=1000.0), {})
+    block = SampleBlock(scene.model, 600)
+    b.advance_block(block, 600)
+    ticks = []
+    for _ in range(600):
+        a.advance()
+        ticks.append(a.sample().dissipation)
+    assert np.max(ticks) > 100.0  # an impact is among them
+    np.testing.assert_allclose(block.dissipation[:600], ticks, rtol=1e-12, atol=1e-12)
