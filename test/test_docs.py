@@ -239,6 +239,12 @@ COMMANDS: dict[str, tuple[Run | SyntaxOnly, ...]] = {
     ),
     "vjm_ct_controller --ros-args -p path:=figure8 -p size:=0.2 -p period:=4.0 "
     "-p preload:=20.0": (Run(why=SIGINT_END, slow=True, until_sigint=True),),
+    "vjm_sim_node --ros-args -p scene:=five_bar_friction -p wait_for_command:=true &": (
+        Run("vjm_sim_node --ros-args -p scene:=five_bar_friction -p wait_for_command:=true "
+            "-p duration:=1.0", why=NODE_DURATION, slow=True),
+    ),
+    "vjm_ct_controller --ros-args -p path:=circle -p size:=0.05 -p period:=2.0 "
+    "-p compensate_plant:=true": (Run(why=SIGINT_END, slow=True, until_sigint=True),),
     # docs/sweeps.md
     "vjm sweep examples/sweep_gains.yaml": (
         Run(why="192 runs on a local Dask cluster", slow=True, timeout=900.0,

@@ -37,9 +37,19 @@ CASES = {
         "scene": "three_chain", "path": "figure8", "size": 0.2, "period": 4.0,
         "initial": {}, "preload": 20.0,
     },
+    "five_bar_friction_circle": {
+        "scene": "five_bar_friction", "path": "circle", "size": 0.05, "period": 2.0,
+        "initial": {}, "preload": 0.0, "compensate_plant": False,
+    },
+    "five_bar_friction_circle_compensated": {
+        "scene": "five_bar_friction", "path": "circle", "size": 0.05, "period": 2.0,
+        "initial": {}, "preload": 0.0, "compensate_plant": True,
+    },
 }
 """The example runs: the five-bar's pin on a circle (started away from the thesis's singular
-pose), the redundant three-chain's pin on a figure-eight without and with a 20 N m preload."""
+pose), the redundant three-chain's pin on a figure-eight without and with a 20 N m preload, and
+the five-bar with joint friction (``five_bar_friction``) on the same circle, the controller's
+model without and with the plant's friction and damping (``compensate_plant``)."""
 
 
 @dataclass
@@ -110,7 +120,8 @@ def run_case(case: str, mode: str = "lockstep", duration: float = 4.0, settle: f
             sim_cmd += ["-p", f"initial_positions.{joint}:={value}"]
         ctl_cmd = [sys.executable, "-m", "vjm_ros.ros.computed_torque", "--ros-args",
                    "-p", f"path:={spec['path']}", "-p", f"size:={spec['size']}",
-                   "-p", f"period:={spec['period']}", "-p", f"preload:={spec['preload']}"]
+                   "-p", f"period:={spec['period']}", "-p", f"preload:={spec['preload']}",
+                   "-p", f"compensate_plant:={str(spec.get('compensate_plant', False)).lower()}"]
         sim = subprocess.Popen(sim_cmd, env=_env(domain), stdout=subprocess.PIPE,
                                stderr=subprocess.STDOUT, text=True)
         ctl = subprocess.Popen(ctl_cmd, env=_env(domain), stdout=subprocess.PIPE,
