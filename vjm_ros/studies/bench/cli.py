@@ -69,6 +69,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="closure of --long-run (default: the scene's)")
     p.add_argument("--long-run-projection", action="store_true",
                    help="exact closure of --long-run with projection")
+    p.add_argument("--plant", action="store_true",
+                   help="instead of the grid: the friction and hard-stop cases (stick-slip, "
+                        "impacts) over integrators, substeps and closures against a fine "
+                        "reference; with --docs, its section of that page")
     p.add_argument("--from-results", type=Path, metavar="FILE",
                    help="run nothing: write the report, figures and --docs again from a "
                         "results.json (adding the long runs found in --out)")
@@ -128,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
         extra = _parse_set(args.set)
         if args.long_run is not None:
             return _main_long_run(args)
+        if args.plant:
+            return _main_plant(args)
         if args.from_results is not None:
             opts = BenchOptions(scenes=[], out=args.out, docs=args.docs)
             results = rerender(args.from_results, opts)
@@ -159,6 +165,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {tier:11s} {b['label'] if b else 'no single setting qualifies on every scene'}")
     if results["meta"]["mujoco"]["skipped"] and not args.no_mujoco:
         print(f"  MuJoCo rows skipped: {results['meta']['mujoco']['skipped']}")
+    return 0
+
+
+def _main_plant(args) -> int:
+    from vjm_ros.studies.bench import plant
+    from vjm_ros.studies.pages import with_section
+
+    limit_threads()
+    rows = plant.measure(args.repeats)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "plant.json").write_text(json.dumps(jsonable(rows), indent=1) + "\n")
+    text = plant.render(rows)
+    print(text)
+    if args.docs is not None:
+        page = args.docs.read_text() if args.docs.is_file() else ""
+        args.docs.write_text(with_section(page, plant.HEADING, text))
+    print(f"wrote {args.out / 'plant.json'}" + (f"; docs: {args.docs}" if args.docs else ""))
     return 0
 
 
