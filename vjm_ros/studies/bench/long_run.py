@@ -53,7 +53,7 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
         settings = SimulationSettings(integrator=d.get("integrator", "rk4"),
                                       rate=d.get("rate", 1000.0), substeps=d.get("substeps", 1),
                                       closure=g.get("method", "penalty"))
-    sim = Simulator(scene.model, settings, scene.gains)
+    sim = Simulator(scene.model, settings, scene.gains, scene.plant)
     if scene.model.actuators:
         sim.set_efforts(_efforts(scene))
     ticks = int(round(seconds * settings.rate))

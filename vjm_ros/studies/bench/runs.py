@@ -76,7 +76,7 @@ def _efforts(scene: Scene) -> np.ndarray:
 
 def _exact_run(scene: Scene, horizon: float, rate: float, opts: dict) -> tuple[np.ndarray, np.ndarray, float]:
     settings = SimulationSettings(closure="exact", rate=rate, **opts)
-    sim = Simulator(scene.model, settings, scene.gains)
+    sim = Simulator(scene.model, settings, scene.gains, scene.plant)
     if scene.model.actuators:
         sim.set_efforts(_efforts(scene))
     ticks = int(round(horizon * rate))
@@ -179,7 +179,7 @@ def _new_result(scene: str, cfg: RowConfig) -> RowResult:
 def _make_vjm(scene: Scene, cfg: RowConfig) -> Simulator:
     settings = SimulationSettings(integrator=cfg.integrator, rate=cfg.rate,
                                   substeps=cfg.substeps, **cfg.settings)
-    return _started(scene, Simulator(scene.model, settings, scene.gains))
+    return _started(scene, Simulator(scene.model, settings, scene.gains, scene.plant))
 
 
 def _started(scene: Scene, sim):
