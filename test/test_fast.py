@@ -401,20 +401,23 @@ def _simulator(scene, kind: str) -> Simulator:
     return sim
 
 
+@pytest.mark.parametrize("seconds", [0.25, pytest.param(1.0, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("kind", METHODS)
 @pytest.mark.parametrize("name", SCENES)
-def test_one_second_rk4_run(name, kind):
-    """1 s of RK4 at 1 kHz, the simulator against the oracle's mechanism stepped by the oracle's
-    RK4: same trajectory to ``RUN_TOL``, the same evaluation count, the same energies and forces."""
+def test_one_second_rk4_run(name, kind, seconds):
+    """RK4 at 1 kHz (0.25 s; 1 s in the slow suite), the simulator against the oracle's
+    mechanism stepped by the oracle's RK4: same trajectory to ``RUN_TOL``, the same evaluation
+    count, the same energies and forces."""
     scene = load_scene(name)
     fast = _simulator(scene, kind)
     assert fast.integrator.kernel_method >= 0
     ref = Mechanism(scene.model, fast.method)
     q, qd = scene.model.initial_state()
-    for _ in range(1000):
+    ticks = int(round(seconds * 1000))
+    for _ in range(ticks):
         q, qd = RK4().advance(ref, 0.0, q, qd, fast.tau, 1e-3, 1)
         fast.advance()
-    assert fast.t == pytest.approx(1.0, abs=1e-12)
+    assert fast.t == pytest.approx(seconds, abs=1e-12)
     np.testing.assert_allclose(fast.q, q, rtol=0, atol=RUN_TOL)
     np.testing.assert_allclose(fast.qd, qd, rtol=0, atol=RUN_TOL)
     assert fast.mechanism.evaluations == ref.evaluations

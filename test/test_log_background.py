@@ -223,7 +223,8 @@ def test_a_log_that_cannot_be_opened_stops_the_run_before_any_output(tmp_path, m
     assert summary is not None and summary.statistics.message_count > 0
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT,
+                                 pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_a_signal_mid_run_leaves_every_output_complete(tmp_path, sig):
     from mcap.reader import make_reader
 

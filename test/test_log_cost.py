@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from benchmarks import log_cost
 from benchmarks.log_cost import LOG_COST_HEADING
 from vjm_ros.studies.pages import section, with_section
@@ -29,6 +31,7 @@ def test_measure_runs_every_configuration_and_renders_its_section(tmp_path):
     assert ("target 1.5x met" in text) == (r["ratio"]["all"] <= 1.5)
 
 
+@pytest.mark.slow  # five vjm processes: the study's own check
 def test_fresh_runs_report_wall_time_and_elapsed_per_configuration(tmp_path):
     """The study times what a user waits for: one ``vjm run`` process per run, every output
     written (the runs fail loudly otherwise), both times read for each configuration."""

@@ -51,6 +51,7 @@ def test_fuzz_mix_covers_every_class_and_only_valid_commands_are_applicable():
 
 
 @pytest.mark.ros
+@pytest.mark.slow  # 15 s of a flood: a stress test (the refusals themselves: test_ros_node.py)
 def test_a_live_node_survives_a_10_khz_flood_of_fuzzed_commands():
     row = flood.measure("five_bar", seconds=FLOOD_SECONDS, flood_hz=FLOOD_HZ)
     print(flood._format(row))
