@@ -121,6 +121,7 @@ def reap(proc, sig=None, timeout=30.0):
 
 
 @pytest.mark.ros
+@pytest.mark.slow  # 3 s of lockstep with two processes; the computed-torque pair runs by default
 def test_pin_tracks_the_circle_with_the_example_controller():
     # A generous lockstep timeout: on a fresh checkout the controller's first answer waits for
     # the physics kernel to compile (~10 s on this machine); a timeout then is not a lost tick.

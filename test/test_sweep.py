@@ -259,6 +259,7 @@ def _cmdline(pid: int) -> bytes | None:
         return None
 
 
+@pytest.mark.slow  # a sweep interrupted mid-run, with its workers: the signal tests' suite
 def test_ctrl_c_leaves_a_complete_table_and_no_worker(tmp_path):
     spec = tmp_path / "big.yaml"
     # 320 runs of 2 simulated s: minutes of work, so the signal always comes while it runs
