@@ -1,6 +1,6 @@
 """Test-wide set-up: keep DDS discovery on this host and give each pytest process its own domain.
 
-Set before anything imports rclpy (NOTES.md): ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps
+Set before anything imports rclpy (rclpy reads them when it starts): ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps
 discovery traffic on loopback; one ``ROS_DOMAIN_ID`` per process (1-101) keeps parallel runs on
 one machine from seeing each other's messages. ``VJM_TIERED=0``: see below.
 """

@@ -53,7 +53,7 @@ def test_scene_runs_finite_and_deterministic(name):
     b = _run(load_scene(name), 2.0)
     assert np.all(np.isfinite(a.q)) and np.all(np.isfinite(a.qd))
     assert np.array_equal(a.q, b.q) and np.array_equal(a.qd, b.qd)
-    # The thesis gains leave residuals of a few mm at most on these mechanisms (NOTES.md:
+    # The thesis gains leave residuals of a few mm at most on these mechanisms (measured
     # 0.2-14 mm over 10 s); 2 cm flags a closure that came apart.
     assert a.sample().max_closure_error < 0.02
 
