@@ -5,7 +5,7 @@
   and have ``iyy == izz``, so reading the wrong diagonal entry, or dropping the off-diagonal
   terms or the rotation, went unseen. Oracle: the closed form of ``n^T R I R^T n`` for a roll
   ``a`` about x and the normal z, ``s^2 iyy + 2 s c iyz + c^2 izz`` (``s, c = sin a, cos a``).
-* A malformed URDF is reported at its line and column.
+* A malformed URDF is reported at its line and column; a fixed loop joint in ``<gazebo>`` welds.
 * ``vjm run`` accepts a model file where it takes a scene; the run's end state is the one the
   same import gives when simulated directly.
 """
@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 from model_runs import MODELS, run
 
@@ -80,3 +81,23 @@ def test_malformed_urdf_names_its_line_and_column(tmp_path):
         import_model(path)
     # the unclosed <link> is found at the closing </robot>: line 4, column 3 (1-based)
     assert str(path) in str(err.value) and "line 4, column 3" in str(err.value), str(err.value)
+
+
+def test_a_fixed_gazebo_loop_joint_welds(tmp_path):
+    """A ``fixed`` SDFormat joint in ``<gazebo>`` welds (a pin and an angle closure). Welding the
+    four-bar's rocker to the base leaves crank and coupler a triangle with the rocker: a rigid
+    structure, which the crank's torque cannot move (the pinned four-bar turns by > 0.5 rad)."""
+    text = (MODELS / "four_bar.urdf").read_text()
+    welded = text.replace('<joint name="ground_joint" type="revolute">',
+                          '<joint name="ground_joint" type="fixed">')
+    assert welded != text
+    path = tmp_path / "welded.urdf"
+    path.write_text(welded)
+    scene = load_scene(path)
+    assert sorted(scene.model.closure_names) == ["ground_joint", "ground_joint_angle"]
+    pinned = run(load_scene(MODELS / "four_bar.urdf"), 0.3, efforts=[5.0])["q"]
+    rigid = run(scene, 0.3, efforts=[5.0])["q"]
+    assert max(float(np.ptp(q)) for q in pinned.values()) > 0.5  # rad
+    for joint, q in rigid.items():
+        # rad: exact closure holds a rigid structure to round-off (4e-16 seen over 300 ticks)
+        assert np.ptp(q) < 1e-9, (joint, np.ptp(q))
