@@ -5,7 +5,8 @@
   and have ``iyy == izz``, so reading the wrong diagonal entry, or dropping the off-diagonal
   terms or the rotation, went unseen. Oracle: the closed form of ``n^T R I R^T n`` for a roll
   ``a`` about x and the normal z, ``s^2 iyy + 2 s c iyz + c^2 izz`` (``s, c = sin a, cos a``).
-* A malformed URDF is reported at its line and column; a fixed loop joint in ``<gazebo>`` welds.
+* A malformed URDF is reported at its line and column; a fixed loop joint in ``<gazebo>`` welds;
+  on an inclined plane only gravity's in-plane part acts.
 * ``vjm run`` accepts a model file where it takes a scene; the run's end state is the one the
   same import gives when simulated directly.
 """
@@ -101,3 +102,24 @@ def test_a_fixed_gazebo_loop_joint_welds(tmp_path):
     for joint, q in rigid.items():
         # rad: exact closure holds a rigid structure to round-off (4e-16 seen over 300 ticks)
         assert np.ptp(q) < 1e-9, (joint, np.ptp(q))
+
+
+def test_gravity_on_an_inclined_plane_is_its_in_plane_part(tmp_path):
+    """The fixtures' planes are vertical or horizontal (in-plane gravity g or 0). Tilting the
+    table four-bar by a roll ``a`` about x (its base weld) leaves ``g sin a`` in the plane
+    (closed form: ``|g - (g . N) N|`` with ``N = (0, -sin a, cos a)``), along ``-e2``; the
+    links' inertias about ``N`` do not change (their tensors turn with the plane)."""
+    roll = 0.5
+    text = (MODELS / "four_bar.urdf").read_text()
+    weld = '    <parent link="world"/>\n    <child link="base"/>\n'
+    assert weld in text
+    tilted = text.replace(weld, weld + f'    <origin xyz="0 0 0" rpy="{roll} 0 0"/>\n')
+    path = tmp_path / "inclined.urdf"
+    path.write_text(tilted)
+    model = load_scene(path).model
+    flat = load_scene(MODELS / "four_bar.urdf").model
+    # m/s^2: one projection of a 3-vector, round-off 1e-15
+    np.testing.assert_allclose(model.gravity, [0.0, -9.81 * math.sin(roll)], rtol=0, atol=1e-12)
+    assert flat.gravity.tolist() == [0.0, 0.0]
+    for a, b in zip(model.links, flat.links, strict=True):
+        assert a.inertia == pytest.approx(b.inertia, rel=1e-12)  # kg m^2
