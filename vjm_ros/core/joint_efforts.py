@@ -71,6 +71,20 @@ def _has_stop(lflt, k):
 
 
 @_jit(allocates=False)
+def _needed(lflt, k, q, qd, acc, h, implicit):
+    """Whether joint ``k`` needs its row of ``W`` this step: it has sticking friction, or it is
+    on a stop or within twice the step's travel of one (``h`` times the larger of its rate now
+    and its rate predicted at the end of the step), where the step may end with an impact."""
+    if _sticks(lflt, k):
+        return True
+    if not _has_stop(lflt, k):
+        return False
+    u = acc[k] if implicit else qd[k] + h * acc[k]
+    reach = 2.0 * h * max(abs(qd[k]), abs(u))
+    return q[k] - lflt[k, F_RANGE_LO] <= reach or lflt[k, F_RANGE_HI] - q[k] <= reach
+
+
+@_jit(allocates=False)
 def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, lu, piv,
                   minv_at, g, v, vec, rhs, corr, wcols, force, stop, blocks, touch):
     """Choose the friction and stop efforts of a step and add their effect to ``acc`` in place.
@@ -108,7 +122,8 @@ def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, l
     for k in range(n):
         force[k] = 0.0
         stop[k] = 0.0
-        any_joint = any_joint or _sticks(lflt, k) or _has_stop(lflt, k)
+        wcols[k, k] = 0.0  # no row of W for this joint this step (set below when needed)
+        any_joint = any_joint or _needed(lflt, k, q, qd, acc, h, implicit)
     if not any_joint:
         return 0
     for i in range(n):
@@ -125,7 +140,7 @@ def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, l
     if status != 0:
         return status
     for k in range(n):
-        if not (_sticks(lflt, k) or _has_stop(lflt, k)):
+        if not _needed(lflt, k, q, qd, acc, h, implicit):
             continue
         x = wcols[k]  # W is symmetric: its row k is its column k
         for j in range(n):
@@ -203,9 +218,6 @@ def stop_impacts(q, qd, lflt, wcols):
             continue
         lo = lflt[k, F_RANGE_LO]
         hi = lflt[k, F_RANGE_HI]
-        w = wcols[k, k]
-        if not w > 1e-12:
-            continue
         past = 0.0
         if q[k] < lo:
             past = lo - q[k]
@@ -213,10 +225,19 @@ def stop_impacts(q, qd, lflt, wcols):
             past = hi - q[k]
         if past == 0.0:
             continue
+        w = wcols[k, k]
+        sign = 1.0 if past > 0.0 else -1.0
+        if not w > 1e-12:
+            # no row of W: _needed saw the joint beyond twice this step's reach of its stop, so
+            # this does not happen on a step that ends past it; should it, this joint alone
+            # (its kinetic energy then not in the ledger)
+            q[k] = lo if past > 0.0 else hi
+            if sign * qd[k] < 0.0:
+                qd[k] = -lflt[k, F_RESTITUTION] * qd[k]
+            continue
         for j in range(n):  # back on the stop, the closures kept to first order (W's row)
             q[j] += wcols[k, j] * (past / w)
         q[k] = lo if past > 0.0 else hi
-        sign = 1.0 if past > 0.0 else -1.0
         if sign * qd[k] >= 0.0:
             continue
         before = qd[k]

@@ -305,6 +305,8 @@ class Model:
     range_lo: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     range_hi: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     restitution: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    _plant_terms: bool = field(default=False, repr=False)
+    _joint_efforts: bool = field(default=False, repr=False)
 
     @classmethod
     def build(
@@ -397,20 +399,25 @@ class Model:
         model.range_lo = np.array([j.range[0] for j in joints], dtype=float)
         model.range_hi = np.array([j.range[1] for j in joints], dtype=float)
         model.restitution = np.array([j.restitution for j in joints], dtype=float)
+        sticking = (model.friction > 0) & (model.friction_scale == 0)
+        model._plant_terms = bool(
+            model.loads or np.any(model.damping) or np.any(model.armature)
+            or np.any((model.friction > 0) & (model.friction_scale > 0)))
+        model._joint_efforts = bool(np.any(sticking) or np.any(np.isfinite(model.range_lo))
+                                    or np.any(np.isfinite(model.range_hi)))
         return model
 
     @property
     def has_plant_terms(self) -> bool:
-        """True when a joint has damping, armature or smooth friction, or the scene has loads."""
-        return (bool(self.loads) or bool(np.any(self.damping)) or bool(np.any(self.armature))
-                or bool(np.any((self.friction > 0) & (self.friction_scale > 0))))
+        """True when a joint has damping, armature or smooth friction, or the scene has loads
+        (found once by :meth:`build`)."""
+        return self._plant_terms
 
     @property
     def has_joint_efforts(self) -> bool:
         """True when a joint has sticking Coulomb friction or a stop
-        (:mod:`vjm_ros.core.joint_efforts`)."""
-        return bool(np.any((self.friction > 0) & (self.friction_scale == 0))
-                    or np.any(np.isfinite(self.range_lo)) or np.any(np.isfinite(self.range_hi)))
+        (:mod:`vjm_ros.core.joint_efforts`; found once by :meth:`build`)."""
+        return self._joint_efforts
 
     # ------------------------------------------------------------------ names and lookups
     @property
