@@ -15,7 +15,6 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import threading  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import rclpy  # noqa: E402
@@ -25,6 +24,7 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from waiting import wait_for
 
 from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
@@ -33,16 +33,6 @@ DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 ROOT = Path(__file__).resolve().parents[1]
 NODE = "/vjm_sim_node"
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def wait_for(predicate, timeout, what):
-    """Poll ``predicate`` until true; ``timeout`` is a hang guard (wall s), not a speed limit."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 class Probe:

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import WrenchStamped
 from std_msgs.msg import Float64MultiArray
-from test_ros_node import harness, plain_simulator, wait_for  # noqa: F401 (the fixture)
+from test_ros_node import harness, plain_simulator  # noqa: F401 (the fixture)
+from waiting import wait_for
 
 from vjm_ros.core.model import Load
 from vjm_ros.realtime.wrenches import WrenchBuffer

@@ -26,6 +26,7 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
+from waiting import wait_for
 
 from vjm_ros.ros.clock_owner import rivals  # noqa: E402
 from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
@@ -35,16 +36,6 @@ DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 ROOT = Path(__file__).resolve().parents[1]
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 ROBOTS = ("/robot1", "/robot2")
-
-
-def wait_for(predicate, timeout, what):
-    """Poll ``predicate`` until true; ``timeout`` is a hang guard (wall s), not a speed limit."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 class Probe:

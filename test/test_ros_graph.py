@@ -22,6 +22,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import rclpy  # noqa: E402
+import waiting
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
@@ -104,13 +105,8 @@ class Probe:
 
 
 def wait_for(predicate, timeout=60.0, what="condition"):
-    """Poll until true; ``timeout`` is a hang guard (wall s), not a speed limit."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f"timed out waiting for {what}")
+    """:func:`waiting.wait_for` with this file's hang guard, 60.0 s."""
+    waiting.wait_for(predicate, timeout, what)
 
 
 def test_two_simulators_side_by_side_under_namespaces():

@@ -40,6 +40,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
+from waiting import wait_for
 
 from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.node import SimNode, run  # noqa: E402
@@ -55,16 +56,6 @@ NODE = "/vjm_sim_node"
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 ROSOUT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def wait_for(predicate, timeout=10.0, what="condition"):
-    """Poll ``predicate`` until true; ``timeout`` is a hang guard (wall s), not a speed limit."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
 
 
 class Harness:
@@ -666,14 +657,14 @@ def test_executable_runs_five_bar_for_its_duration_while_another_process_listens
     listener = Listener({"/joint_states": JointState, f"{NODE}/closures/pin/wrench": WrenchStamped})
     before = set(glob.glob("/dev/shm/fastdds_*"))
     try:
-        code, out = finish(node_process("scene:=five_bar", "duration:=2.0"))
+        code, out = finish(node_process("scene:=five_bar", "duration:=5.0"))
         wait_for(lambda: listener.count[f"{NODE}/closures/pin/wrench"] > 0, 5.0,
                  f"wrenches (received {listener.count}; node output:\n{out})")
     finally:
         listener.close()
     assert code == 0, out
     summary = summary_of(out)
-    assert summary["reason"] == "duration" and summary["ticks"] == 2000
+    assert summary["reason"] == "duration" and summary["ticks"] == 5000
     assert listener.count["/joint_states"] > 500 and listener.count[f"{NODE}/closures/pin/wrench"] > 50
     assert not orphaned_shm(before)
 

@@ -12,6 +12,7 @@ import threading
 import time
 
 import rclpy
+import waiting
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray
@@ -23,13 +24,8 @@ DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 
 
 def wait_for(predicate, timeout=30.0, what="condition"):
-    """Poll until true; ``timeout`` is a hang guard (wall s), not a speed limit."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return
-        time.sleep(0.005)
-    raise AssertionError(f"timed out waiting for {what}")
+    """:func:`waiting.wait_for` with this file's hang guard, 30.0 s."""
+    waiting.wait_for(predicate, timeout, what)
 
 
 def context():

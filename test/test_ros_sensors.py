@@ -16,7 +16,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
-from test_ros_node import NODE, Harness, stamps_ns, wait_for  # noqa: E402
+from test_ros_node import NODE, Harness, stamps_ns  # noqa: E402
+from waiting import wait_for  # noqa: E402
 
 from vjm_ros.scene.loader import load_scene  # noqa: E402
 from vjm_ros.sim.settings import SimulationSettings  # noqa: E402
