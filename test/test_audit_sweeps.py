@@ -126,6 +126,7 @@ def scheduler():
         cluster.close()
 
 
+@pytest.mark.slow  # a scheduler and a worker of its own: the suite's five-minute budget
 def test_a_sweep_on_a_scheduler_given_by_address_sends_the_scene_text(scheduler, tmp_path,
                                                                       monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
