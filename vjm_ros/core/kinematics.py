@@ -2,8 +2,7 @@
 
 :class:`Kinematics` holds the kernel's link frames and rates
 (:meth:`vjm_ros.core.mechanism.Mechanism.kinematics`, or the ``dyn.kin`` of an evaluation); the
-functions here only read them: points given in link frames, the links and ground links as
-segments for drawing. The recursions themselves are in :func:`vjm_ros.core.terms.terms`.
+functions here only read them: points given in link frames, the links as segments for drawing. The recursions themselves are in :func:`vjm_ros.core.terms.terms`.
 """
 
 from __future__ import annotations
@@ -84,17 +83,3 @@ def link_segments(model: Model, kin: Kinematics) -> np.ndarray:
     end = start + model.length[:, None] * kin.rotation[:n, :, 0]
     return np.stack((start, end), axis=1)
 
-
-def base_segments(model: Model, kin: Kinematics) -> np.ndarray:
-    """Ground link of each chain plus the slide offset of its first joint, for drawing.
-
-    Returns
-    -------
-    ndarray, shape (n_chains, 2, 2)
-        From the chain's ground point ``O`` to the first link's origin, m.
-    """
-    out = np.zeros((len(model.chains), 2, 2))
-    for c, chain in enumerate(model.chains):
-        out[c, 0] = chain.origin
-        out[c, 1] = kin.origin[chain.links[0]] if chain.links else chain.origin
-    return out

@@ -17,9 +17,6 @@ from vjm_ros.formats.joint_graph import reduce_graph
 from vjm_ros.scene.builder import Scene, SceneBuilder
 from vjm_ros.scene.limits import FILE_KEY
 
-FORMATS = {".sdf": "SDFormat", ".urdf": "URDF", ".xml": "MJCF"}
-"""File extensions read as models, and their formats."""
-
 
 @dataclass(frozen=True)
 class ImportedModel:

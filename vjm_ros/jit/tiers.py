@@ -118,11 +118,6 @@ def interpreted(function):
 
 
 # ---------------------------------------------------------------------------- numba's cache
-def signature(dispatcher, args: tuple) -> tuple:
-    """numba's argument types for a call with ``args`` (what the dispatcher itself computes)."""
-    return numba_internals.argument_types(jit.compiled(dispatcher), args)
-
-
 def load_cached(dispatcher, args: tuple) -> bool:
     """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
     this process already, or loaded now from numba's cache (as numba's own first call does)."""

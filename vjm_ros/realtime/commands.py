@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# classes of refused commands (the keys of the throttled warnings)
 NON_FINITE = "non_finite"
 WRONG_LENGTH = "wrong_length"
 UNKNOWN_JOINT = "unknown_joint"
@@ -40,9 +41,6 @@ DUPLICATE_JOINT = "duplicate_joint"
 NO_EFFORTS = "no_efforts"
 MALFORMED = "malformed"
 OVERSIZE = "oversize"
-REJECTION_KINDS = (NON_FINITE, WRONG_LENGTH, UNKNOWN_JOINT, NOT_ACTUATED, DUPLICATE_JOINT, NO_EFFORTS,
-                   MALFORMED, OVERSIZE)
-"""Classes of refused commands (keys of the throttled warnings)."""
 
 
 @dataclass(frozen=True)
@@ -54,7 +52,7 @@ class Verdict:
     accepted : bool
         The command replaced the efforts in force (possibly clamped).
     kind : str
-        Class of the refusal (one of :data:`REJECTION_KINDS`), empty when accepted.
+        Class of the refusal (:data:`NON_FINITE` ... :data:`OVERSIZE`), empty when accepted.
     reason : str
         Why it was refused, in words that name the offending entries.
     clamped : tuple of str

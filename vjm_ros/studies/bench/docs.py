@@ -42,16 +42,6 @@ from vjm_ros.studies.bench.scaling import (
 from vjm_ros.studies.pages import sections
 
 
-def _closure_stats(rows: dict[str, list[RowResult]], label: str, fixed_only: bool = True):
-    vals = [r.max_closure_error for rs in rows.values() for r in rs
-            if r.engine == "vjm" and r.closure == label and r.ok and r.max_closure_error is not None
-            and (r.step is not None or not fixed_only)]
-    pos = [r.position_deviation for rs in rows.values() for r in rs
-           if r.engine == "vjm" and r.closure == label and r.ok and r.position_deviation is not None
-           and (r.step is not None or not fixed_only)]
-    return (min(vals), max(vals), min(pos), max(pos)) if vals and pos else None
-
-
 def merge_kept_sections(generated: str, previous: str) -> str:
     """``generated`` followed by the sections of ``previous`` it does not write itself.
 
