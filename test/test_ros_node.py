@@ -82,7 +82,7 @@ class Harness:
         self.listen("/clock", Clock)
         self.listen("/diagnostics", DiagnosticArray)
         self.listen(f"{NODE}/markers", MarkerArray)
-        for name in self.node.loop.sim.model.closure_names:
+        for name in self.node.loop.sim.model.force_names:  # closures, then stops
             self.listen(f"{NODE}/closures/{name}/wrench", WrenchStamped)
         self.logs = []
         self.probe.create_subscription(

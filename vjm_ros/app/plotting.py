@@ -37,7 +37,7 @@ from matplotlib.colors import LinearSegmentedColormap, Normalize, to_rgb
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from vjm_ros.core.model import ANGLE, GROUND, HINGE, SLIDER, Model
+from vjm_ros.core.model import GROUND, HINGE, SLIDER, Model
 from vjm_ros.sim.trajectory import Trajectory
 
 FIGURE_NAMES = (
@@ -314,9 +314,9 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     model = traj.model
     t = traj["t"]
     force = traj["force"]
-    closures = model.closures
-    point_closures = [k for k, c in enumerate(closures) if c.kind != ANGLE]
-    angle_closures = [k for k, c in enumerate(closures) if c.kind == ANGLE]
+    names, moment = model.force_names, model.force_is_moment  # closures, then stops
+    point_closures = [k for k, m in enumerate(moment) if not m]
+    angle_closures = [k for k, m in enumerate(moment) if m]
     panels = int(bool(point_closures)) + int(bool(angle_closures))
     fig = _new_figure(_TWO_PANEL_SIZE if panels == 2 else _SERIES_SIZE)
     fig.suptitle(f"{name}: constraint forces at the closure points")
@@ -334,8 +334,8 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
         ax = axes[row]
         for j, k in enumerate(point_closures):
             color = f"C{j % 10}"
-            _series(ax, t, force[:, k, 0], color=color, ls="-", label=f"{closures[k].name} Fx")
-            _series(ax, t, force[:, k, 1], color=color, ls="--", label=f"{closures[k].name} Fy")
+            _series(ax, t, force[:, k, 0], color=color, ls="-", label=f"{names[k]} Fx")
+            _series(ax, t, force[:, k, 1], color=color, ls="--", label=f"{names[k]} Fy")
         ax.set_ylabel("force (N)")
         ax.set_title("forces on the constrained points, world frame", fontsize="medium")
         _legend(ax, ax.get_lines())
@@ -344,9 +344,9 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
         ax = axes[row]
         for j, k in enumerate(angle_closures):
             color = f"C{(j + len(point_closures)) % 10}"
-            _series(ax, t, force[:, k, 2], color=color, ls="-", label=f"{closures[k].name} Mz")
+            _series(ax, t, force[:, k, 2], color=color, ls="-", label=f"{names[k]} Mz")
         ax.set_ylabel("moment (N m)")
-        ax.set_title("moments of the angle closures", fontsize="medium")
+        ax.set_title("moments of the angle closures and the stops", fontsize="medium")
         _legend(ax, ax.get_lines())
     _time_axes(axes, t)
     return fig

@@ -234,6 +234,17 @@ class Mechanism:
         return float(self._data.impulse[self.n])
 
     @property
+    def stop_efforts(self) -> np.ndarray:
+        """The effort of each joint's stops over the last step of a fixed-step method, N m or N,
+        shape (n,) (:mod:`vjm_ros.core.joint_efforts`; a copy)."""
+        return self._data.stop.copy()
+
+    def clear_joint_efforts(self) -> None:
+        """Forget the last step's friction and stop efforts (a run starting again)."""
+        self._data.impulse[:] = 0.0
+        self._data.stop[:] = 0.0
+
+    @property
     def is_penalty(self) -> bool:
         """True when closures are enforced by penalty forces."""
         return isinstance(self._method, PenaltyClosure)
@@ -469,7 +480,6 @@ class Mechanism:
                               float(h), int(steps), q_out, qd_out, self._step))
         return q_out, qd_out
 
-
     def warm_up_pipeline(self) -> float:
         """Compile the block pipeline (:mod:`vjm_ros.core.pipeline`), or load it from numba's
         cache, with a call of zero ticks. Returns the wall time spent, s."""
@@ -479,7 +489,7 @@ class Mechanism:
         model = self.model
         q, qd = model.initial_state()
         links = np.array([p.ref.link for p in model.points], dtype=np.int64)
-        no_ticks = pipeline.new_outputs(0, self.n, len(model.points), len(model.closures))
+        no_ticks = pipeline.new_outputs(0, model)
         self.advance_observed(K.RK4, q, qd, np.zeros(self.n), 1e-3, 1, False, np.inf,
                               np.asarray(model.length, dtype=float), links,
                               np.zeros((len(model.points), 2)), no_ticks)

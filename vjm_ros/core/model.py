@@ -268,6 +268,8 @@ class Model:
         the same chain).
     strict_ancestors : ndarray of float, shape (n, n)
         Same without the diagonal.
+    stop_joints : ndarray of int64, shape (s,)
+        The joints with a ``range`` (a stop at one end at least), in joint order.
     """
 
     name: str
@@ -305,6 +307,7 @@ class Model:
     range_lo: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     range_hi: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     restitution: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    stop_joints: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     _plant_terms: bool = field(default=False, repr=False)
     _joint_efforts: bool = field(default=False, repr=False)
 
@@ -403,8 +406,9 @@ class Model:
         model._plant_terms = bool(
             model.loads or np.any(model.damping) or np.any(model.armature)
             or np.any((model.friction > 0) & (model.friction_scale > 0)))
-        model._joint_efforts = bool(np.any(sticking) or np.any(np.isfinite(model.range_lo))
-                                    or np.any(np.isfinite(model.range_hi)))
+        model.stop_joints = np.flatnonzero(np.isfinite(model.range_lo)
+                                           | np.isfinite(model.range_hi))
+        model._joint_efforts = bool(np.any(sticking) or model.stop_joints.size)
         return model
 
     @property
@@ -434,6 +438,19 @@ class Model:
     def closure_names(self) -> list[str]:
         """Closure names in scene order."""
         return [c.name for c in self.closures]
+
+    @property
+    def force_names(self) -> list[str]:
+        """Names of the constraint forces the outputs report: every closure in scene order, then
+        the stop of each joint with a ``range``, ``<joint>_stop``, in joint order."""
+        return self.closure_names + [f"{self.joints[j].name}_stop" for j in self.stop_joints]
+
+    @property
+    def force_is_moment(self) -> list[bool]:
+        """Per entry of :attr:`force_names`: True where the force is a moment ``Mz`` (an angle
+        closure, the stop of a revolute joint), False where it is a force ``(Fx, Fy)``."""
+        return ([c.kind == ANGLE for c in self.closures]
+                + [bool(self.is_revolute[j]) for j in self.stop_joints])
 
     @property
     def actuator_names(self) -> list[str]:

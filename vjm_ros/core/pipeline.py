@@ -11,15 +11,18 @@ It stops at the first tick whose step fails (a singular matrix), whose state is 
 whose closure residual exceeds the divergence limit, and says which tick: the caller replays
 that tick on the tick-by-tick path, which raises the full diagnostic.
 
-Output arrays (``T`` ticks, ``n`` joints, ``p`` named points, ``k`` closures), each row ``i``
-for the state at the end of tick ``i``:
+Output arrays (``T`` ticks, ``n`` joints, ``p`` named points, ``k`` closures, ``s`` joints with a
+stop, ``f = k + s``), each row ``i`` for the state at the end of tick ``i``:
 
 * ``q``, ``qd``, ``qdd`` (T, n): rad or m, per s, per s^2;
 * ``theta`` (T, n): absolute link angles, rad;
 * ``points`` (T, p, 2): named points, m;
-* ``force`` (T, k, 3): ``(Fx, Fy, Mz)`` of each closure on its point, N and N m;
+* ``force`` (T, f, 3): ``(Fx, Fy, Mz)`` of each closure on its point, N and N m, then of each
+  stop (:attr:`vjm_ros.core.model.Model.stop_joints`) on its joint's link: the stop effort ``s``
+  held over the tick's last step as a moment ``(0, 0, s)`` (revolute) or a force ``s n(theta_pred)``
+  (prismatic) at the link's origin;
 * ``error`` (T, k): ``|C|`` per closure, m or rad;
-* ``cpoints`` (T, k, 2): the closures' points of application, m;
+* ``cpoints`` (T, f, 2): the closures' points of application, then the stopped joints, m;
 * ``energy`` (T, 4): kinetic, potential, constraint (penalty springs), total, J;
 * ``power`` (T,): ``tau . qd``, W; ``dissipation`` (T,): ``sum Kv Cdot^2`` (penalty), W;
 * ``segments`` (T, n, 2, 2): start and end of every link, m.
@@ -37,6 +40,7 @@ import numpy as np
 
 from vjm_ros.core import kernels as K
 from vjm_ros.core import layout
+from vjm_ros.core.model import Model
 from vjm_ros.core.terms import point_motion
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
@@ -46,15 +50,16 @@ OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints",
 """Names of the output arrays, in the order :func:`observe` takes them."""
 
 
-def observable_shapes(n: int, points: int, closures: int) -> tuple[tuple[int, ...], ...]:
-    """Shape of one row of each output array (:data:`OBSERVABLES` order)."""
-    return ((n,), (n,), (n,), (n,), (points, 2), (closures, 3), (closures,), (closures, 2), (4,),
-            (), (), (n, 2, 2))
+def observable_shapes(model: Model) -> tuple[tuple[int, ...], ...]:
+    """Shape of one row of each output array of ``model`` (:data:`OBSERVABLES` order)."""
+    n, p, k = model.n, len(model.points), len(model.closures)
+    f = k + len(model.stop_joints)
+    return ((n,), (n,), (n,), (n,), (p, 2), (f, 3), (k,), (f, 2), (4,), (), (), (n, 2, 2))
 
 
-def new_outputs(rows: int, n: int, points: int, closures: int) -> tuple[np.ndarray, ...]:
-    """Zeroed output arrays for ``rows`` ticks."""
-    return tuple(np.zeros((rows,) + shape) for shape in observable_shapes(n, points, closures))
+def new_outputs(rows: int, model: Model) -> tuple[np.ndarray, ...]:
+    """Zeroed output arrays of ``model`` for ``rows`` ticks."""
+    return tuple(np.zeros((rows,) + shape) for shape in observable_shapes(model))
 
 
 OK = 0
@@ -164,6 +169,7 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
                     qd[j] / lflt[j, layout.F_FRICTION_SCALE]) * qd[j]
     if par[layout.P_JOINT_EFFORTS] != 0.0:
         dissipation += data[25][n]  # joint friction and stops: mean power over the last tick
+        observe_stops(row, model, data, k, o_force, o_cpoints)
     kinetic = kin[n, layout.K_PCOS]
     potential = kin[n, layout.K_PSIN]
     spring = kin[n, layout.K_SLIDE]
@@ -174,6 +180,29 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     o_power[row] = power
     o_diss[row] = dissipation
     return status
+
+
+@_jit(allocates=False, inline="always")
+def observe_stops(row, model, data, first, o_force, o_cpoints):
+    """The force of every joint's stop, from row ``first`` of ``o_force[row]`` and
+    ``o_cpoints[row]`` on, in joint order (module docstring)."""
+    lint, lflt = model[0], model[1]
+    kin, stop = data[0], data[26]
+    c = first
+    for j in range(lint.shape[0]):
+        if lflt[j, layout.F_RANGE_LO] > -math.inf or lflt[j, layout.F_RANGE_HI] < math.inf:
+            s = stop[j]
+            if lint[j, layout.L_REV] == 1:
+                o_force[row, c, 0] = 0.0
+                o_force[row, c, 1] = 0.0
+                o_force[row, c, 2] = s
+            else:  # along n(theta_pred) = (-sin, cos) of the link before
+                o_force[row, c, 0] = -kin[j, layout.K_PSIN] * s
+                o_force[row, c, 1] = kin[j, layout.K_PCOS] * s
+                o_force[row, c, 2] = 0.0
+            o_cpoints[row, c, 0] = kin[j, layout.K_OX]
+            o_cpoints[row, c, 1] = kin[j, layout.K_OY]
+            c += 1
 
 
 def tick_state(n: int) -> tuple[np.ndarray, ...]:

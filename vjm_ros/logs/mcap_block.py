@@ -244,7 +244,7 @@ class BlockEncoder:
 
     def __init__(self, model, channels: dict[str, int], topics: messages.Topics,
                  marker_every: int, force_scale: float, measured: bool = False):
-        k = len(model.closures)
+        k = len(model.force_names)
         self.force_scale = float(force_scale)
         self.marker_every = int(marker_every)
         self.measured = bool(measured)
@@ -254,12 +254,12 @@ class BlockEncoder:
             self.kinds.append(_Kind(channels[topics.ground_truth_joint_states], joints))
         self.kinds += [
             _Kind(channels[topics.constraint_forces], cdr.multi_array_layout(
-                messages.labelled_layout(model.closure_names, len(messages.FORCE_COMPONENTS)),
+                messages.labelled_layout(model.force_names, len(messages.FORCE_COMPONENTS)),
                 3 * k)),
         ]
         wrench = cdr.wrench_stamped_layout(messages.FRAME_ID)
         self.kinds += [_Kind(channels[topics.wrench(name)], wrench)
-                       for name in model.closure_names]
+                       for name in model.force_names]
         self.kinds += [
             _Kind(channels[topics.energy], cdr.multi_array_layout(
                 messages.labelled_layout(messages.ENERGY_LABELS, 1),

@@ -161,7 +161,7 @@ class McapRecorder(Recorder):
         self.samples = 0
         self._closed = False
         self._joint_names = list(model.joint_names)
-        self._closure_names = list(model.closure_names)
+        self._closure_names = list(model.force_names)  # closures, then stops
         self.measured = bool(settings.get("sensors"))
         """A scene with sensors: ``/joint_states`` holds the measured state (as the node
         publishes it) and ``/<node>/ground_truth/joint_states`` the exact one."""

@@ -22,6 +22,9 @@ topic                                       type                                
 (*) Only for a scene with sensors: ``/joint_states`` then carries the measured state and this
 topic the exact one.
 
+The stop of a joint with a ``range`` is reported as a closure named ``<joint>_stop``
+(``Model.force_names``): an entry of ``constraint_forces`` and a ``closures/<joint>_stop/wrench``.
+
 Times are integer nanoseconds; every header uses the frame ``world`` (x right, y up, z out of the
 plane, metres).
 """
@@ -159,23 +162,26 @@ def joint_state(joint_names: Sequence[str], sample, ns: int) -> dict:
     }
 
 
-def constraint_forces(closure_names: Sequence[str], sample) -> dict:
-    """``std_msgs/Float64MultiArray`` of the constraint force of every closure.
+def constraint_forces(force_names: Sequence[str], sample) -> dict:
+    """``std_msgs/Float64MultiArray`` of the constraint force of every closure, then of every
+    stop.
 
-    Layout: one dimension per closure, ``dim[i].label`` = closure name, ``dim[i].size`` =
-    ``dim[i].stride`` = 3, ``data_offset`` = 0; closure ``i`` holds
+    Layout: one dimension per entry, ``dim[i].label`` = its name, ``dim[i].size`` =
+    ``dim[i].stride`` = 3, ``data_offset`` = 0; entry ``i`` holds
     ``data[3 i : 3 i + 3] = (fx, fy, mz)``: the world-frame force (N, N) and moment (N m, angle
-    closures) that the closure applies to its point ``Pa``.
+    closures) that the closure applies to its point ``Pa``; for the stop of a joint with a
+    ``range`` (named ``<joint>_stop``), what the stop applies to the joint's link at the joint:
+    a moment (revolute) or a force along the slide (prismatic).
 
     Parameters
     ----------
-    closure_names : sequence of str
-        ``Model.closure_names``.
+    force_names : sequence of str
+        ``Model.force_names``.
     sample : Sample
-        ``closure_force``, shape (k, 3).
+        ``closure_force``, shape (k + s, 3).
     """
     return {
-        "layout": labelled_layout(closure_names, len(FORCE_COMPONENTS)),
+        "layout": labelled_layout(force_names, len(FORCE_COMPONENTS)),
         "data": sample.closure_force.reshape(-1).tolist(),
     }
 

@@ -184,9 +184,10 @@ def iter_messages(
 
 # ---------------------------------------------------------------- replay
 def _force_array(model: Model, msg) -> np.ndarray:
-    """``(k, 3)`` closure forces from a labelled Float64MultiArray, matched by closure name."""
-    out = np.full((len(model.closures), 3), np.nan)
-    index = {name: i for i, name in enumerate(model.closure_names)}
+    """``(k + s, 3)`` closure and stop forces from a labelled Float64MultiArray, matched by name
+    (``model.force_names``)."""
+    out = np.full((len(model.force_names), 3), np.nan)
+    index = {name: i for i, name in enumerate(model.force_names)}
     offset = int(msg.layout.data_offset)
     for d, dim in enumerate(msg.layout.dim):
         i = index.get(dim.label)
@@ -245,7 +246,7 @@ class _Poser:
             points=points,
             closure_force=forces,
             closure_error=self.mech.closures.errors(terms),
-            closure_points=terms.points,
+            closure_points=np.concatenate((terms.points, kin.origin[model.stop_joints])),
             energy=energy,
             power_in=float(effort @ qd),
             dissipation=float("nan"),
@@ -324,7 +325,7 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
     joint_topic = (topics.ground_truth_joint_states if info.settings.get("sensors")
                    else topics.joint_states)
     poser = _Poser(model)
-    no_force = np.full((len(model.closures), 3), np.nan)
+    no_force = np.full((len(model.force_names), 3), np.nan)
     no_energy = np.full(len(ENERGY_LABELS), np.nan)
     settings = {  # the replayed samples are the exact states: no measurements
         k: v for k, v in info.settings.items()

@@ -10,6 +10,7 @@ entity                         archetype      content
 ``mechanism/joints``           Points2D       link origins (the joints), m
 ``mechanism/points``           Points2D       named points (chain tips), labelled, m
 ``mechanism/forces``           Arrows2D       constraint force of each closure at its point,
+                                              then of each stop at its joint, times
                                               ``force_scale`` m/N, labelled
 ``mechanism/traces``           Points2D       named points again, shown over all past time:
                                               the tip paths
@@ -17,7 +18,8 @@ entity                         archetype      content
                                               all past time: the chrono-cyclograph
 ``series/joints/position``     Scalars        one series per joint, rad or m
 ``series/joints/velocity``     Scalars        rad/s or m/s
-``series/constraint_forces``   Scalars        ``<closure>.x``, ``.y`` (N) or ``.z`` (N m)
+``series/constraint_forces``   Scalars        ``<closure>.x``, ``.y`` (N) or ``.z`` (N m);
+                                              ``<joint>_stop.*`` alike
 ``series/energy``              Scalars        kinetic, potential, constraint, total, J
 ``series/closure_error``       Scalars        ``|C|`` per closure, m or rad
 ``series/measured/position``   Scalars        with sensors: what they measure, rad or m (the
@@ -77,23 +79,24 @@ _LINK_COLORS = np.array(
 
 
 def force_components(model: Model) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Which constraint-force components are meaningful, per closure kind.
+    """Which constraint-force components are meaningful, per entry of ``model.force_names``.
 
-    Hinge and slider closures report a force ``(x, y)`` N; angle closures a moment ``z`` N m.
+    Hinge and slider closures and the stops of prismatic joints report a force ``(x, y)`` N;
+    angle closures and the stops of revolute joints a moment ``z`` N m.
 
     Returns
     -------
     rows, cols : ndarray of int, shape (m,)
-        Index into ``Sample.closure_force`` (k, 3).
+        Index into ``Sample.closure_force`` (k + s, 3).
     names : list of str
         ``"<closure>.x"`` etc.
     """
     rows, cols, names = [], [], []
-    for i, c in enumerate(model.closures):
-        for j, axis in ((2, "z"),) if c.kind == ANGLE else ((0, "x"), (1, "y")):
+    for i, (name, moment) in enumerate(zip(model.force_names, model.force_is_moment, strict=True)):
+        for j, axis in ((2, "z"),) if moment else ((0, "x"), (1, "y")):
             rows.append(i)
             cols.append(j)
-            names.append(f"{c.name}.{axis}")
+            names.append(f"{name}.{axis}")
     return np.array(rows, dtype=int), np.array(cols, dtype=int), names
 
 
@@ -198,7 +201,7 @@ class RerunRecorder(Recorder):
         self._closed = False
         self.measured = bool(settings.get("sensors"))
         self._force_rows, self._force_cols, self._force_names = force_components(model)
-        self._is_angle = np.array([c.kind == ANGLE for c in model.closures], dtype=bool)
+        self._is_angle = np.array(model.force_is_moment, dtype=bool)
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id or uuid.uuid4())
         self._connect(target, default_blueprint(model, self.measured))
         self._log_static(scene_text or model.source_text)
@@ -254,7 +257,7 @@ class RerunRecorder(Recorder):
         )
         log(
             f"{ROOT}/forces",
-            rr.Arrows2D.from_fields(labels=model.closure_names, colors=[220, 40, 30], radii=0.006),
+            rr.Arrows2D.from_fields(labels=model.force_names, colors=[220, 40, 30], radii=0.006),
             static=True,
         )
         ground = [c.origin for c in model.chains]
@@ -286,7 +289,7 @@ class RerunRecorder(Recorder):
         self._t = np.zeros(b, dtype=np.int64)
         self._q = np.zeros((b, n))
         self._qd = np.zeros((b, n))
-        self._force = np.zeros((b, k, 3))
+        self._force = np.zeros((b, len(self.model.force_names), 3))
         self._energy = np.zeros((b, 4))
         self._error = np.zeros((b, k))
         self._measured = np.zeros((b, 3, n)) if self.measured else None
@@ -411,7 +414,7 @@ class RerunRecorder(Recorder):
             points = pts.reshape(g * p, 2)
             send(f"{ROOT}/points", idx, rr.Points2D.columns(positions=points).partition([p] * g))
             send(f"{ROOT}/traces", idx, rr.Points2D.columns(positions=points).partition([p] * g))
-        k = len(self.model.closures)
+        k = len(self.model.force_names)
         if k:
             origins = cpts.reshape(g * k, 2)
             forces = cf.reshape(g * k, 3)

@@ -32,6 +32,7 @@ topic                           type                                      when
 
 A scene with ``sensors`` publishes on ``joint_states`` what its sensors measure, and the exact
 state beside it on ``~/ground_truth/joint_states`` (``sensor_msgs/JointState``, same times).
+The stop of a joint with a ``range`` is published as a closure named ``<joint>_stop``.
 
 Message layouts: :mod:`vjm_ros.ros.conversions` (the per-tick ones published as serialized bytes, :mod:`vjm_ros.ros.wire`). Header stamps are simulated time, which only
 increases (also across ``~/reset``); the node itself runs on the wall clock (it publishes
@@ -291,9 +292,9 @@ class SimNode(Node):
         )
 
     def _adopt(self, model) -> None:
-        """Names, layouts and one wrench publisher per closure for ``model``."""
+        """Names, layouts and one wrench publisher per closure and per stop for ``model``."""
         self._joint_names = list(model.joint_names)
-        self._closure_names = list(model.closure_names)
+        self._closure_names = list(model.force_names)
         for name in list(self._wrench_pubs):
             if name not in self._closure_names:
                 self.destroy_publisher(self._wrench_pubs.pop(name))

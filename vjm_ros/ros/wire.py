@@ -47,7 +47,7 @@ class TickWire:
     joint_names : sequence of str
         ``Model.joint_names``.
     closure_names : sequence of str
-        ``Model.closure_names``.
+        ``Model.force_names``: the closures, then the stops.
     """
 
     def __init__(self, joint_names: Sequence[str], closure_names: Sequence[str]):

@@ -140,6 +140,7 @@ class SceneBuilder(KeyReader):
         self.links = links
         self.link_index = {lk.name: i for i, lk in enumerate(links)}
         self.joint_index = {j.name: i for i, j in enumerate(joints)}
+        self.stop_names = {f"{j.name}_stop" for j in joints if any(map(math.isfinite, j.range))}
         closures = self.closures(self.section(doc, "closures"))
         actuators, dynamics = self.actuators(self.section(doc, "actuators"))
         sensors = self.sensors(doc.get("sensors"), joints)
@@ -311,6 +312,9 @@ class SceneBuilder(KeyReader):
             cname = self.name(cl.get("name", f"{kind}{k + 1}"), f"{key}.name")
             if cname in names:
                 raise self.fail(f"{key}.name", "a closure name used once", cname)
+            if cname in self.stop_names:  # a joint's stop is reported under this name
+                raise self.fail(f"{key}.name", "a name other than a joint's stop, <joint>_stop",
+                                cname)
             names.add(cname)
             if "gains" in cl:
                 raise self.fail(

@@ -103,8 +103,7 @@ class SampleBlock:
     """
 
     def __init__(self, model: Model, capacity: int):
-        self.arrays = pipeline.new_outputs(capacity, model.n, len(model.points),
-                                           len(model.closures))
+        self.arrays = pipeline.new_outputs(capacity, model)
         for (key, _), arr in zip(BLOCK_FIELDS, self.arrays, strict=True):
             setattr(self, key, arr)
         self.t = np.zeros(capacity)

@@ -149,6 +149,7 @@ class Simulator:
         self.tau = np.zeros(self.model.n)
         self.actuation.reset()
         self.integrator.reset()
+        self.mechanism.clear_joint_efforts()
         if self.sensors is not None:
             self.measured = self.sensors.reset(self._exact_state())
 
@@ -506,6 +507,17 @@ class Simulator:
             dissipation = _sum_in_order(np.concatenate(([dissipation], terms)))
         if model.has_joint_efforts:  # joint friction and stops: mean power over the last tick
             dissipation += mech.friction_power
+        force = mech.closures.closure_forces(ev.closure, ev.row_force)
+        force_points = ev.closure.points
+        if len(model.stop_joints):  # then each stop's, as pipeline.observe_stops writes it
+            stops = model.stop_joints
+            effort = mech.stop_efforts[stops]
+            stop_force = np.zeros((len(stops), 3))
+            revolute = model.is_revolute[stops]
+            stop_force[revolute, 2] = effort[revolute]
+            stop_force[~revolute, :2] = kin.n_pred[stops][~revolute] * effort[~revolute, None]
+            force = np.concatenate((force, stop_force))
+            force_points = np.concatenate((force_points, kin.origin[stops]))
         sigma = np.nan
         if singular_values and model.n_rows:
             sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
@@ -517,9 +529,9 @@ class Simulator:
             effort=self.tau.copy(),
             theta=kin.theta[: model.n].copy(),
             points=points,
-            closure_force=mech.closures.closure_forces(ev.closure, ev.row_force),
+            closure_force=force,
             closure_error=mech.closures.errors(ev.closure),
-            closure_points=ev.closure.points,
+            closure_points=force_points,
             energy=energy,
             power_in=_sum_in_order(self.tau * self.qd),
             dissipation=dissipation,

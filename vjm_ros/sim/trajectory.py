@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vjm_ros.core.model import ANGLE, Model
+from vjm_ros.core.model import Model
 from vjm_ros.core.pipeline import OBSERVABLES, observable_shapes
 from vjm_ros.jit import tiers
 from vjm_ros.sim import float_text
@@ -52,8 +52,7 @@ class Trajectory:
     def __init__(self, model: Model, capacity: int = 1024, measured: bool = False):
         self.model = model
         self._rows = 0
-        shapes = dict(zip(OBSERVABLES, observable_shapes(
-            model.n, len(model.points), len(model.closures)), strict=True))
+        shapes = dict(zip(OBSERVABLES, observable_shapes(model), strict=True))
         shapes.update(t=(), effort=(model.n,), measured=(3, model.n))
         self._fields = _SAMPLE_FIELDS + ((("measured", "measured"),) if measured else ())
         self._buf = {key: np.zeros((capacity,) + shapes[key]) for key, _ in self._fields}
@@ -174,8 +173,8 @@ class Trajectory:
         cols += [f"theta.{lk}" for lk in m.link_names]
         for p in m.points:
             cols += [f"x.{p.name}", f"y.{p.name}"]
-        for c in m.closures:
-            cols += [f"f.{c.name}.z"] if c.kind == ANGLE else [f"f.{c.name}.x", f"f.{c.name}.y"]
+        for name, moment in zip(m.force_names, m.force_is_moment, strict=True):
+            cols += [f"f.{name}.z"] if moment else [f"f.{name}.x", f"f.{name}.y"]
         cols += [f"energy.{e}" for e in ENERGY_NAMES] + ["closure_error"]
         if "measured" in self._buf:
             for j in m.joint_names:
@@ -199,9 +198,8 @@ class Trajectory:
         parts.append(self["theta"][rows])
         parts.append(self["points"][rows].reshape(count, -1))
         force = self["force"][rows]
-        for k, c in enumerate(m.closures):
-            f = force[:, k]
-            parts.append(f[:, 2:3] if c.kind == ANGLE else f[:, :2])
+        for k, moment in enumerate(m.force_is_moment):
+            parts.append(force[:, k, 2:3] if moment else force[:, k, :2])
         parts.append(self["energy"][rows])
         err = self["error"][rows]
         parts.append((err.max(axis=1) if err.shape[1] else np.zeros(count))[:, None])
