@@ -80,8 +80,6 @@ REFCOUNT_FREE = False
 """Whether functions that create no arrays are compiled without numba's reference counting (set
 by :func:`activate`)."""
 
-_REFCOUNT_FREE_OPTIONS: dict = {}
-
 
 # ---------------------------------------------------------------------------- deferred numba
 class Deferred:
@@ -141,7 +139,7 @@ def _options(options: dict) -> dict:
     numba_options = {"cache": True, "nogil": True, "error_model": "numpy",
                      "inline": options["inline"]}
     if not options["allocates"]:
-        numba_options.update(_REFCOUNT_FREE_OPTIONS)
+        numba_options.update(numba_internals.REFCOUNT_FREE_OPTIONS)
     return numba_options
 
 
@@ -170,7 +168,7 @@ def activate() -> bool:
     so that numba, typing a function, finds its compiled callees. Functions made after this are
     compiled functions at once. Returns :data:`HAVE_NUMBA`; where numba fails to import, the
     plain functions take the deferred ones' places."""
-    global _ACTIVE, HAVE_NUMBA, LOCATORS_INSTALLED, REFCOUNT_FREE, _REFCOUNT_FREE_OPTIONS
+    global _ACTIVE, HAVE_NUMBA, LOCATORS_INSTALLED, REFCOUNT_FREE
     with _ACTIVATING:
         if _ACTIVE:
             return HAVE_NUMBA
@@ -181,9 +179,8 @@ def activate() -> bool:
             except ImportError:  # pragma: no cover - installed but broken
                 HAVE_NUMBA = False
         if HAVE_NUMBA:
-            LOCATORS_INSTALLED = numba_internals.install_locators(sources_stamp, PACKAGE)
-            _REFCOUNT_FREE_OPTIONS = numba_internals.refcount_free_options()
-            REFCOUNT_FREE = bool(_REFCOUNT_FREE_OPTIONS)
+            numba_internals.install_locators(sources_stamp, PACKAGE)
+            LOCATORS_INSTALLED = REFCOUNT_FREE = True
         for deferred in _DEFERRED:
             deferred.dispatcher = _make(deferred.py_func, deferred.vjm_options)
         spaces = {id(d.py_func.__globals__): d.py_func.__globals__ for d in _DEFERRED}

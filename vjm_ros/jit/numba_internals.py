@@ -2,11 +2,11 @@
 
 The rest of the package uses numba's public ``njit`` only (through :mod:`vjm_ros.jit.deferred`);
 what it needs beyond that goes through the functions here, each written for the numba of
-``requirements/lock.txt`` and falling back to numba's own behaviour where the layout differs:
+``requirements/lock.txt``:
 
 - :func:`install_locators`: numba's cache keyed on all of the compiled sources
   (:mod:`vjm_ros.jit.sources`) instead of each function's own file;
-- :func:`refcount_free_options`: numba's ``_nrt`` option (compile without reference counting);
+- :data:`REFCOUNT_FREE_OPTIONS`: numba's ``_nrt`` option (compile without reference counting);
 - :func:`loads_lazily`: a cached function loaded without numba's refresh of its typing and
   lowering registries;
 - :func:`is_dispatcher`, :func:`argument_types`, :func:`load_cached`, :func:`cache_directory`:
@@ -70,32 +70,21 @@ def _keyed_on(base: type, stamp: Callable[[], bytes], package: Path) -> type:
     return Locator
 
 
-def install_locators(stamp: Callable[[], bytes], package: Path) -> bool:
+def install_locators(stamp: Callable[[], bytes], package: Path) -> None:
     """Put locators that key the cache of the functions defined under ``package`` on ``stamp()``
-    first in numba's list; False where numba's caching layout is not the one expected (numba's
-    own per-file keys then apply)."""
-    try:
-        from numba.core import caching
+    first in numba's list."""
+    from numba.core import caching
 
+    classes = caching.CacheImpl._locator_classes
+    if not any(c.__name__.startswith("VjmSources") for c in classes):
         bases = (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator,
                  caching.UserWideCacheLocator)
-        classes = caching.CacheImpl._locator_classes
-    except (ImportError, AttributeError):  # pragma: no cover - another numba layout
-        return False
-    if not any(c.__name__.startswith("VjmSources") for c in classes):
         classes[:0] = [_keyed_on(b, stamp, package) for b in bases]
-    return True
 
 
 # ---------------------------------------------------------------------------- options
-def refcount_free_options() -> dict:
-    """numba's options that compile a function without reference counting (``_nrt``), empty where
-    this numba does not take them."""
-    try:
-        from numba.core.cpu import CPUTargetOptions
-    except ImportError:  # pragma: no cover - another numba layout
-        return {}
-    return {"_nrt": False} if hasattr(CPUTargetOptions, "_nrt") else {}
+REFCOUNT_FREE_OPTIONS = {"_nrt": False}
+"""numba's options that compile a function without reference counting (``_nrt``)."""
 
 
 # ---------------------------------------------------------------------------- loading
@@ -116,11 +105,10 @@ def _load_without_registries(cache, sig, target_context):
 
 
 def loads_lazily(dispatcher) -> None:
-    """Make ``dispatcher``'s cache load with :func:`_load_without_registries` where numba's
-    cache has the layout it is written for (otherwise numba's own loading stays)."""
+    """Make ``dispatcher``'s cache load with :func:`_load_without_registries` (nothing to do
+    where numba compiles nothing, ``NUMBA_DISABLE_JIT``)."""
     cache = getattr(dispatcher, "_cache", None)
-    if all(hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors",
-                                             "load_overload")):
+    if cache is not None:
         cache.load_overload = functools.partial(_load_without_registries, cache)
 
 
@@ -143,14 +131,11 @@ def load_cached(dispatcher, args: tuple) -> bool:
     sig = argument_types(dispatcher, args)
     if sig in dispatcher.overloads:
         return True
-    cache = getattr(dispatcher, "_cache", None)
-    context = getattr(dispatcher, "targetctx", None)
-    if cache is None or context is None or not hasattr(dispatcher, "add_overload"):
-        return False
     from numba.core.compiler_lock import global_compiler_lock
 
+    context = dispatcher.targetctx
     with global_compiler_lock:
-        result = cache.load_overload(sig, context)
+        result = dispatcher._cache.load_overload(sig, context)
         if result is None:
             return False
         if not result.objectmode:
