@@ -10,7 +10,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks", "benchmarks.*"]),
-    package_data={"vjm_ros.scene": ["builtin/*.yaml"]},
+    package_data={"vjm_ros.scene": ["builtin/*.yaml"], "vjm_ros.logs": ["ros2_types.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

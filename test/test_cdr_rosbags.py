@@ -98,3 +98,8 @@ def test_schema_texts_name_the_fields_rosbags_knows():
         names = [ln.split()[1] for ln in own.strip().split("\n") if ln and "=" not in ln]
         assert names == [n for n, _ in TYPESTORE.fielddefs[type_name][1]], type_name
         assert msgdefs.type_hash(type_name).startswith("RIHS01_")
+
+
+def test_the_stored_definitions_and_hashes_are_rosbags_typestore_s():
+    """``ros2_types.json`` (read when a log opens) is what rosbags' Kilted typestore gives."""
+    assert msgdefs._types() == msgdefs.from_typestore()
