@@ -44,6 +44,8 @@ import yaml
 
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 """libyaml's safe emitter where PyYAML was built with it, else the pure-Python one."""
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""libyaml's safe parser likewise (1 ms -> 0.26 ms per QoS text)."""
 
 BAG_METADATA_VERSION = 9
 """``metadata.yaml`` version written: what rosbag2 writes from Jazzy through Kilted."""
@@ -134,15 +136,20 @@ def qos_profiles(text: str, topic: str = "") -> list[dict]:
     ValueError
         When ``text`` is not a YAML list of mappings (``topic`` names it in the message).
     """
-    return copy.deepcopy(_qos_profiles(text, topic))
+    profiles = _qos_profiles(text)
+    if profiles is None:
+        raise ValueError(f"offered_qos_profiles of {topic or 'a channel'}: expected a YAML list "
+                         f"of QoS profiles, found {text[:80]!r}")
+    return copy.deepcopy(profiles)
 
 
 @functools.cache
-def _qos_profiles(text: str, topic: str) -> list[dict]:
-    profiles = yaml.safe_load(text) if text else []
+def _qos_profiles(text: str) -> list[dict] | None:
+    """The profiles of a text (parsed once per text: every topic of a log has one of two), or
+    None when it is not a list of mappings."""
+    profiles = yaml.load(text, Loader=_LOADER) if text else []
     if not isinstance(profiles, list) or not all(isinstance(p, dict) for p in profiles):
-        raise ValueError(f"offered_qos_profiles of {topic or 'a channel'}: expected a YAML list "
-                         f"of QoS profiles, found {text[:80]!r}")
+        return None
     return [
         {k: policy_name(k, p[k]) if k in POLICY_NAMES else p[k] for k in QOS_KEYS if k in p}
         for p in profiles
