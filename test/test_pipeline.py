@@ -29,7 +29,7 @@ SCENES = ["four_bar", "six_bar", "double_slider", "five_bar", "three_chain", "rr
 :mod:`vjm_ros.core.hub_linalg`, which no built-in scene takes)."""
 METHODS = FIXED_STEP_SETTINGS
 FIELDS = ("q", "qd", "qdd", "effort", "theta", "points", "closure_force", "closure_error",
-          "closure_points", "energy", "power_in", "dissipation", "segments")
+          "closure_points", "energy", "power_in", "dissipation", "joint_loss", "segments")
 
 
 def _pair(scene: str, **settings):

@@ -477,11 +477,12 @@ def test_ticks_between_outputs():
 class _S:
     """A sample with just the fields the ledger reads."""
 
-    def __init__(self, t, qd, effort, energy, dissipation=0.0):
+    def __init__(self, t, qd, effort, energy, dissipation=0.0, joint_loss=0.0):
         self.t, self.qd, self.effort = t, np.asarray(qd, float), np.asarray(effort, float)
         self.energy = np.array([0.0, 0.0, 0.0, energy])
         self.power_in = float(self.effort @ self.qd)
         self.dissipation = dissipation
+        self.joint_loss = joint_loss
         self.closure_error = np.zeros(1)
         self.sigma_min = math.nan
 
@@ -504,6 +505,16 @@ def test_energy_ledger_uses_the_effort_of_each_interval():
     ledger.update(_S(1.0, [1.0], [0.0], 0.0))
     ledger.update(_S(2.0, [1.0], [5.0], 5.0))
     assert ledger.residual == pytest.approx(0.0, abs=1e-12)
+
+
+def test_energy_ledger_counts_what_the_joints_took_at_its_tick():
+    # at rest; an impact takes 0.5 J during the second tick: the ledger balances at once
+    ledger = EnergyLedger()
+    ledger.update(_S(0.0, [0.0], [0.0], 2.0))
+    ledger.update(_S(0.1, [0.0], [0.0], 2.0))
+    ledger.update(_S(0.2, [0.0], [0.0], 1.5, joint_loss=0.5))
+    assert ledger.residual == pytest.approx(0.0, abs=1e-12)
+    assert ledger.max_residual == pytest.approx(0.0, abs=1e-12)
 
 
 def test_energy_balance_of_a_real_run_is_small():

@@ -452,8 +452,6 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
             for j in range(n):
                 removed -= h * (impulse[j] + stop[j]) * 0.5 * (column[j] + qd[j])
             impulse[n] += removed + stop_impacts(q, qd, lflt, wcols)
-            if it == steps * stages - 1:  # the last step: energy removed -> mean power
-                impulse[n] = impulse[n] / (h * steps)
     return status
 
 

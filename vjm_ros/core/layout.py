@@ -150,8 +150,9 @@ class Data(NamedTuple):
     column : ndarray, shape (n,)
         The rates at the start of a step with friction.
     impulse : ndarray, shape (n + 1,)
-        The friction effort of each joint over the last step (N m or N); at ``n``, the mean
-        power the friction and the stops took over the last call's steps (W).
+        The friction effort of each joint over the last step (N m or N); at ``n``, the energy
+        the friction and the stops (their impacts included) took over the last call's steps
+        (J).
     stop : ndarray, shape (n,)
         The effort of each joint's stops over the last step, N m or N.
     """

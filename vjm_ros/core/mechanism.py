@@ -228,9 +228,9 @@ class Mechanism:
                    for e in (self._step, self._advance_ticks))
 
     @property
-    def friction_power(self) -> float:
-        """Mean power the sticking joint friction took over the last call of a fixed-step
-        method, W (:mod:`vjm_ros.core.joint_efforts`)."""
+    def joint_loss(self) -> float:
+        """Energy the sticking joint friction and the stops (their impacts included) took over
+        the last call of a fixed-step method, J (:mod:`vjm_ros.core.joint_efforts`)."""
         return float(self._data.impulse[self.n])
 
     @property

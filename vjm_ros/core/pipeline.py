@@ -24,7 +24,11 @@ stop, ``f = k + s``), each row ``i`` for the state at the end of tick ``i``:
 * ``error`` (T, k): ``|C|`` per closure, m or rad;
 * ``cpoints`` (T, f, 2): the closures' points of application, then the stopped joints, m;
 * ``energy`` (T, 4): kinetic, potential, constraint (penalty springs), total, J;
-* ``power`` (T,): ``tau . qd``, W; ``dissipation`` (T,): ``sum Kv Cdot^2`` (penalty), W;
+* ``power`` (T,): ``tau . qd``, W; ``dissipation`` (T,): ``sum Kv Cdot^2`` (penalty), joint
+  damping and smooth friction, W;
+* ``loss`` (T,): the energy sticking friction and stops (their impacts included) took over the
+  tick, J (:mod:`vjm_ros.core.joint_efforts`): a sum over the tick's steps, not a power, since an
+  impact takes its energy at once;
 * ``segments`` (T, n, 2, 2): start and end of every link, m.
 
 With :data:`~vjm_ros.core.kernels.RK4`, a tick's first stage is the acceleration observed at the
@@ -46,7 +50,7 @@ from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
 
 OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints", "energy",
-               "power", "dissipation", "segments")
+               "power", "dissipation", "loss", "segments")
 """Names of the output arrays, in the order :func:`observe` takes them."""
 
 
@@ -54,7 +58,7 @@ def observable_shapes(model: Model) -> tuple[tuple[int, ...], ...]:
     """Shape of one row of each output array of ``model`` (:data:`OBSERVABLES` order)."""
     n, p, k = model.n, len(model.points), len(model.closures)
     f = k + len(model.stop_joints)
-    return ((n,), (n,), (n,), (n,), (p, 2), (f, 3), (k,), (f, 2), (4,), (), (), (n, 2, 2))
+    return ((n,), (n,), (n,), (n,), (p, 2), (f, 3), (k,), (f, 2), (4,), (), (), (), (n, 2, 2))
 
 
 def new_outputs(rows: int, model: Model) -> tuple[np.ndarray, ...]:
@@ -101,7 +105,7 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
         ``(s, w)`` of each named point in its link frame, m (world position on the ground).
     out : tuple
         ``(q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation,
-        segments)`` output arrays (module docstring).
+        loss, segments)`` output arrays (module docstring).
     evaluated : bool
         ``data`` already holds the evaluation at ``(q, qd)`` with ``tau``, its acceleration
         in ``out``'s ``qdd[row]`` and its energies in ``kin``'s ground row (a step made with
@@ -115,7 +119,7 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
     _, _, cint, _, gains, par, _ = model
     kin, _, _, _, crow, _, cpts = data[:7]
     o_q, o_qd, o_qdd, o_theta, o_points, o_force, o_error, o_cpoints = out[:8]
-    o_energy, o_power, o_diss, o_seg = out[8:]
+    o_energy, o_power, o_diss, o_loss, o_seg = out[8:]
     n = q.shape[0]
     status = 0
     if not evaluated:
@@ -167,8 +171,9 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
             if lflt[j, layout.F_FRICTION_SCALE] > 0.0:
                 dissipation += lflt[j, layout.F_FRICTION] * math.tanh(
                     qd[j] / lflt[j, layout.F_FRICTION_SCALE]) * qd[j]
+    o_loss[row] = 0.0
     if par[layout.P_JOINT_EFFORTS] != 0.0:
-        dissipation += data[25][n]  # joint friction and stops: mean power over the last tick
+        o_loss[row] = data[25][n]  # joint friction and stops: energy over the last tick
         observe_stops(row, model, data, k, o_force, o_cpoints)
     kinetic = kin[n, layout.K_PCOS]
     potential = kin[n, layout.K_PSIN]

@@ -250,6 +250,7 @@ class _Poser:
             energy=energy,
             power_in=float(effort @ qd),
             dissipation=float("nan"),
+            joint_loss=float("nan"),
             segments=link_segments(model, kin),
         )
 

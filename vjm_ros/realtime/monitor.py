@@ -27,9 +27,10 @@ OK, WARN, ERROR = 0, 1, 2
 class EnergyLedger:
     """Running energy balance ``E(t) - E(0) - W(t)`` over consecutive samples.
 
-    ``W`` integrates ``tau . qd - sum Kv Cdot^2`` by the trapezoid rule; over the interval that
-    ends at a sample the efforts are the ones applied during it (``sample.effort``), also at the
-    interval's start.
+    ``W`` integrates ``tau . qd - dissipation`` by the trapezoid rule, less each tick's
+    ``joint_loss`` (the energy sticking friction and stops took); over the interval that ends at a
+    sample the efforts are the ones applied during it (``sample.effort``), also at the interval's
+    start.
     """
 
     def __init__(self) -> None:
@@ -65,7 +66,7 @@ class EnergyLedger:
             rate_start = sum(map(operator.mul, sample.effort.tolist(), self._qd))
             rate_start -= self._dissipation
             rate_end = sample.power_in - sample.dissipation
-            self.work += 0.5 * (rate_start + rate_end) * (sample.t - self._t)
+            self.work += 0.5 * (rate_start + rate_end) * (sample.t - self._t) - sample.joint_loss
             self.residual = total - self._e0 - self.work
             self.max_residual = max(self.max_residual, abs(self.residual))
         self._t = sample.t

@@ -21,9 +21,11 @@ class RowSample:
         fields = dict(BLOCK_FIELDS)
         self._power = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "power_in"))
         self._dissipation = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "dissipation"))
+        self._loss = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "joint_loss"))
         views = {attr: getattr(block, key)[0] for key, attr in fields.items()
-                 if attr not in ("power_in", "dissipation")}
-        self.sample = Sample(t=0.0, effort=block.effort, power_in=0.0, dissipation=0.0, **views)
+                 if attr not in ("power_in", "dissipation", "joint_loss")}
+        self.sample = Sample(t=0.0, effort=block.effort, power_in=0.0, dissipation=0.0,
+                             joint_loss=0.0, **views)
 
     def refresh(self) -> Sample:
         """The sample of the tick the block holds now (valid until the next tick)."""
@@ -32,6 +34,7 @@ class RowSample:
         s.effort = b.effort
         s.power_in = float(self._power[0])
         s.dissipation = float(self._dissipation[0])
+        s.joint_loss = float(self._loss[0])
         s.sigma_min = math.nan
         s.measured = None if b.measured is None else b.measured[0]
         return s

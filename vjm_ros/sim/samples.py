@@ -25,18 +25,23 @@ class Sample:
         Absolute link angles, rad.
     points : ndarray, shape (n_points, 2), or None
         Named point positions, m (None when the sample was taken without geometry).
-    closure_force : ndarray, shape (k, 3)
-        World-frame force of each closure on its point ``(Fx, Fy, Mz)``, N / N m.
+    closure_force : ndarray, shape (k + s, 3)
+        World-frame force of each closure on its point ``(Fx, Fy, Mz)``, N / N m, then of each
+        joint's stop (``Model.force_names``, :mod:`vjm_ros.core.pipeline`).
     closure_error : ndarray, shape (k,)
         ``|C|`` per closure, m (rad for angle closures).
-    closure_points : ndarray, shape (k, 2)
-        Point of application of each closure force, m.
+    closure_points : ndarray, shape (k + s, 2)
+        Point of application of each closure force, then each stopped joint, m.
     energy : ndarray, shape (4,)
         Kinetic, potential, constraint, total, J.
     power_in : float
         ``tau . qd``, W.
     dissipation : float
-        ``sum Kv Cdot^2`` (penalty), W.
+        ``sum Kv Cdot^2`` (penalty), joint damping and smooth friction, W.
+    joint_loss : float
+        Energy the joints' sticking friction and stops (their impacts included) took over the
+        tick that ended here, J (0 without them; a power would miss an impact's energy, which
+        it takes at once).
     segments : ndarray, shape (n, 2, 2), or None
         Link start/end points for drawing, m (None when taken without geometry).
     sigma_min : float
@@ -59,6 +64,7 @@ class Sample:
     energy: np.ndarray
     power_in: float
     dissipation: float
+    joint_loss: float
     segments: np.ndarray | None
     sigma_min: float = field(default=np.nan)
     measured: np.ndarray | None = None
@@ -71,7 +77,7 @@ class Sample:
 
 BLOCK_FIELDS = tuple(zip(pipeline.OBSERVABLES, (
     "q", "qd", "qdd", "theta", "points", "closure_force", "closure_error", "closure_points",
-    "energy", "power_in", "dissipation", "segments"), strict=True))
+    "energy", "power_in", "dissipation", "joint_loss", "segments"), strict=True))
 """Arrays of a :class:`SampleBlock` (the compiled pipeline's outputs) and the :class:`Sample`
 field each row of them gives."""
 
@@ -95,7 +101,7 @@ class SampleBlock:
     effort : ndarray, shape (n,) or (T, n)
         Efforts held over the block, N m or N; or one row per tick, for rows collected from
         ticks with efforts of their own (:class:`vjm_ros.logs.rows.LogRows`).
-    q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation, segments
+    q, qd, qdd, theta, points, force, error, cpoints, energy, power, dissipation, loss, segments
         As the fields of :class:`Sample`, with a leading tick axis (the layout of
         :mod:`vjm_ros.core.pipeline`).
     measured : ndarray, shape (T, 3, n), or None

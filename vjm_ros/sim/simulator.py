@@ -505,8 +505,6 @@ class Simulator:
             terms = terms[np.column_stack((np.ones(model.n, bool),
                                            model.friction_scale > 0)).reshape(-1)]
             dissipation = _sum_in_order(np.concatenate(([dissipation], terms)))
-        if model.has_joint_efforts:  # joint friction and stops: mean power over the last tick
-            dissipation += mech.friction_power
         force = mech.closures.closure_forces(ev.closure, ev.row_force)
         force_points = ev.closure.points
         if len(model.stop_joints):  # then each stop's, as pipeline.observe_stops writes it
@@ -535,6 +533,7 @@ class Simulator:
             energy=energy,
             power_in=_sum_in_order(self.tau * self.qd),
             dissipation=dissipation,
+            joint_loss=mech.joint_loss if model.has_joint_efforts else 0.0,
             segments=segments,
             sigma_min=sigma,
             measured=None if self.measured is None else self.measured.copy(),

@@ -26,7 +26,7 @@ ENERGY_NAMES = ("kinetic", "potential", "constraint", "total")
 
 
 _STORED = ("q", "qd", "qdd", "theta", "points", "force", "error", "energy", "power",
-           "dissipation", "segments")
+           "dissipation", "loss", "segments")
 """Arrays of a :class:`~vjm_ros.sim.samples.SampleBlock` the trajectory keeps (all but the
 closures' points of application), with the block's names."""
 
@@ -119,14 +119,16 @@ class Trajectory:
     def energy_balance_residual(self) -> float:
         """Largest deviation from the energy ledger of docs/design.md section 2, J.
 
-        ``E(t) - E(0) - integral(tau . qd - sum Kv Cdot^2) dt`` with the trapezoid rule over the
-        samples, where ``E = T + V + sum 1/2 Kp C^2``.
+        ``E(t) - E(0) - integral(tau . qd - dissipation) dt + sum of joint_loss`` with the
+        trapezoid rule over the samples, where ``E = T + V + sum 1/2 Kp C^2``; the energy the
+        joints' sticking friction and stops took (``loss``) is summed per tick as it was taken.
         """
         if len(self) < 2:
             return 0.0
         t = self["t"]
         rate = self["power"] - self["dissipation"]
-        work = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))))
+        work = np.concatenate(([0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t)
+                                                - self["loss"][1:])))
         total = self["energy"][:, 3]
         return float(np.max(np.abs(total - total[0] - work)))
 

@@ -83,7 +83,7 @@ def run(text: str, seconds: float, integrator: str, substeps: int, closure: str
     q = np.vstack((first.q, block.q[:ticks]))
     rate = np.concatenate(([first.power_in - first.dissipation],
                            block.power[:ticks] - block.dissipation[:ticks]))
-    work = float(np.sum(0.5 * (rate[1:] + rate[:-1])) * 1e-3)
+    work = float(np.sum(0.5 * (rate[1:] + rate[:-1])) * 1e-3 - np.sum(block.loss[:ticks]))
     return q, float(block.energy[ticks - 1, 3] - first.energy[3] - work), wall
 
 
