@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import REVOLUTE
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.formats.mjcf_out import INITIAL_KEY, MjcfSettings, carriage_mass, scene_mjcf
 from vjm_ros.scene.loader import builtin_scenes, load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator

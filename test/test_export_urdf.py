@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import GROUND, HINGE, SLIDER
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.formats.urdf_out import ROOT_LINK, scene_urdf
 from vjm_ros.scene.loader import builtin_scenes, load_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator

@@ -475,9 +475,9 @@ def test_readers_match_the_oracle(name, model):
     from oracle.kinematics import point_jacobians, point_motion
 
     from vjm_ros.core.mechanism import Mechanism as Compiled
-    from vjm_ros.core.mechanism import forward_kinematics as kernel_kinematics
-    from vjm_ros.core.mechanism import point_reader
     from vjm_ros.core.model import PointRef
+    from vjm_ros.core.readers import forward_kinematics as kernel_kinematics
+    from vjm_ros.core.readers import point_reader
 
     rng = np.random.default_rng(13)
     reader = Compiled.reader(model)

@@ -28,7 +28,7 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-from vjm_ros.core.mechanism import forward_kinematics  # noqa: E402
+from vjm_ros.core.readers import forward_kinematics  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 from vjm_ros.scene import load_scene  # noqa: E402
 

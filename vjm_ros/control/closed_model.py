@@ -63,8 +63,9 @@ from vjm_ros.control.errors import (
     SingularConfigurationError,
 )
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.core.mechanism import Mechanism, point_reader
+from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
+from vjm_ros.core.readers import point_reader
 from vjm_ros.scene.assembly import assemble
 from vjm_ros.scene.loader import Scene, load_scene, parse_scene
 

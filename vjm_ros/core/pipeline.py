@@ -44,7 +44,6 @@ import numpy as np
 
 from vjm_ros.core import kernels as K
 from vjm_ros.core import layout
-from vjm_ros.core.model import Model
 from vjm_ros.core.terms import point_motion
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
@@ -54,15 +53,17 @@ OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints",
 """Names of the output arrays, in the order :func:`observe` takes them."""
 
 
-def observable_shapes(model: Model) -> tuple[tuple[int, ...], ...]:
-    """Shape of one row of each output array of ``model`` (:data:`OBSERVABLES` order)."""
+def observable_shapes(model) -> tuple[tuple[int, ...], ...]:
+    """Shape of one row of each output array of ``model``, a
+    :class:`~vjm_ros.core.model.Model` (:data:`OBSERVABLES` order)."""
     n, p, k = model.n, len(model.points), len(model.closures)
     f = k + len(model.stop_joints)
     return ((n,), (n,), (n,), (n,), (p, 2), (f, 3), (k,), (f, 2), (4,), (), (), (), (n, 2, 2))
 
 
-def new_outputs(rows: int, model: Model) -> tuple[np.ndarray, ...]:
-    """Zeroed output arrays of ``model`` for ``rows`` ticks."""
+def new_outputs(rows: int, model) -> tuple[np.ndarray, ...]:
+    """Zeroed output arrays of ``model`` (a :class:`~vjm_ros.core.model.Model`) for ``rows``
+    ticks."""
     return tuple(np.zeros((rows,) + shape) for shape in observable_shapes(model))
 
 

@@ -51,8 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import ANGLE, GROUND, HINGE, REVOLUTE, SLIDER, Model
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.formats.urdf_out import number, numbers
 from vjm_ros.scene.plant import ActuatorDynamics, Plant
 
@@ -250,17 +250,17 @@ def _joint_plant(joint, settings: MjcfSettings) -> str:
     attrs = ""
     for key, attr in (("damping", "damping"), ("armature", "armature"),
                       ("friction", "frictionloss")):
-        value = float(getattr(joint, key, 0.0))
+        value = float(getattr(joint, key))
         if value:
             attrs += f' {attr}="{number(value)}"'
-    if getattr(joint, "friction", 0.0):
+    if joint.friction:
         attrs += (f' solreffriction="{numbers(*settings.solref)}" '
                   f'solimpfriction="{numbers(*settings.solimp)}"')
-    lo, hi = getattr(joint, "range", (-math.inf, math.inf))
+    lo, hi = joint.range
     if math.isfinite(lo) or math.isfinite(hi):
         lower = lo if math.isfinite(lo) else -LIMIT_UNBOUNDED
         upper = hi if math.isfinite(hi) else LIMIT_UNBOUNDED
-        zeta = stop_damping_ratio(float(getattr(joint, "restitution", 0.0)))
+        zeta = stop_damping_ratio(float(joint.restitution))
         attrs += (f' range="{numbers(lower, upper)}" '
                   f'solreflimit="{numbers(STOP_TIME_STEPS * settings.timestep, zeta)}" '
                   f'solimplimit="{numbers(*settings.solimp)}"')

@@ -64,8 +64,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import ANGLE, GROUND, HINGE, REVOLUTE, SLIDER, Model
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.scene.plant import Plant
 
 ROOT_LINK = "world"
@@ -305,7 +305,7 @@ def joint_origin(model: Model, i: int, offset: float = 0.0) -> tuple[np.ndarray,
 
 def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     joint = model.joints[i]
-    lo, hi = getattr(joint, "range", (-math.inf, math.inf))
+    lo, hi = joint.range
     bounded = math.isfinite(lo) or math.isfinite(hi)
     if joint.kind == REVOLUTE:
         kind = "revolute" if bounded else "continuous"
@@ -324,7 +324,7 @@ def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
         upper = hi - offset if math.isfinite(hi) else UNBOUNDED
         attrs = {"lower": number(lower), "upper": number(upper), **attrs}
     ET.SubElement(el, "limit", **attrs)
-    damping, friction = (float(getattr(joint, k, 0.0)) for k in ("damping", "friction"))
+    damping, friction = float(joint.damping), float(joint.friction)
     if damping or friction:
         ET.SubElement(el, "dynamics", damping=number(damping), friction=number(friction))
     return el

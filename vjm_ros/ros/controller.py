@@ -48,8 +48,8 @@ from std_msgs.msg import Float64MultiArray
 
 from vjm_ros.core.compiled import make_mechanism
 from vjm_ros.core.constraints import ExactClosure
-from vjm_ros.core.mechanism import forward_kinematics
 from vjm_ros.core.model import HINGE, Model
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.ros.controller_base import ControllerNode
 from vjm_ros.ros.conversions import joint_arrays, seconds
 from vjm_ros.ros.runtime import run_node_until_signal

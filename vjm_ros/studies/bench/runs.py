@@ -15,7 +15,7 @@ from vjm_ros.core.errors import (
     VjmError,
 )
 from vjm_ros.core.kinematics import link_segments, point_positions
-from vjm_ros.core.mechanism import forward_kinematics
+from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.scene.loader import Scene
 from vjm_ros.sim.samples import RUN_BLOCK_TICKS, SampleBlock
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
