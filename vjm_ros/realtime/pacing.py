@@ -89,16 +89,12 @@ class Pacer:
     margin : float, optional
         Time before a deadline at which sleeping stops and spinning starts, s; by default it
         follows the sleeps' overshoot (see the module notes).
-    late_tolerance : float, optional
-        Start delay beyond which a tick counts as late, s; 10 % of the period by default.
     max_lag : float
         Largest backlog caught up, s; beyond it the schedule restarts (a resync).
     clock : callable
         Monotonic time, s.
     sleep : callable
         ``sleep(seconds)``.
-    spin : callable
-        Called while spinning to the deadline (``os.sched_yield``: releases the GIL).
     """
 
     def __init__(
@@ -107,11 +103,9 @@ class Pacer:
         realtime: bool = True,
         *,
         margin: float | None = None,
-        late_tolerance: float | None = None,
         max_lag: float = 0.1,
         clock: Callable[[], float] = time.perf_counter,
         sleep: Callable[[float], None] = time.sleep,
-        spin: Callable[[], object] = os.sched_yield,
     ):
         if not period > 0:
             raise ValueError(f"period: expected a positive number of seconds, found {period!r}")
@@ -120,11 +114,10 @@ class Pacer:
         self.adaptive = margin is None
         self.margin = MARGIN_START if margin is None else float(margin)
         self._overshoot = self.margin - MARGIN_GUARD
-        self._tolerance = late_tolerance
         self.max_lag = float(max_lag)
         self._clock = clock
         self._sleep = sleep
-        self._yield = spin
+        self._yield = os.sched_yield  # called while spinning to the deadline: releases the GIL
         self._next: float | None = None
         self.stats = PacingStats()
 
@@ -140,8 +133,8 @@ class Pacer:
 
     @property
     def late_tolerance(self) -> float:
-        """Start delay beyond which a tick counts as late, s."""
-        return 0.1 * self.period if self._tolerance is None else float(self._tolerance)
+        """Start delay beyond which a tick counts as late: 10 % of the period, s."""
+        return 0.1 * self.period
 
     @property
     def next_due(self) -> float | None:

@@ -10,8 +10,11 @@ import math
 
 from vjm_ros.scene.loader import Scene, parse_scene
 
+GAINS = "closure_method: {method: penalty, omega_n: 100.0, zeta: 1.0}"
+"""The generated scenes' ``closure_method`` line."""
 
-def chain_scene(n_links: int, gains: str = "closure_method: {method: penalty, omega_n: 100.0, zeta: 1.0}") -> Scene:
+
+def chain_scene(n_links: int) -> Scene:
     """One chain of ``n_links`` revolute links (1 m, 1 kg in all) whose tip runs on a horizontal line.
 
     The links hang in a zigzag (absolute angles alternating -60 and -120 degrees); the line passes
@@ -21,8 +24,6 @@ def chain_scene(n_links: int, gains: str = "closure_method: {method: penalty, om
     ----------
     n_links : int
         1 or more.
-    gains : str
-        The scene's ``closure_method`` line.
 
     Returns
     -------
@@ -51,17 +52,17 @@ def chain_scene(n_links: int, gains: str = "closure_method: {method: penalty, om
         "closures:",
         f"  - {{name: tip_line, type: slider, point: {{link: l{n_links - 1}, at: tip}}, "
         f"line: {{ground: [{x!r}, {y!r}], direction: [1.0, 0.0]}}}}",
-        gains,
+        GAINS,
     ])
     return parse_scene(text, source=f"<chain_scene {n_links}>")
 
 
-def star_scene(n_chains: int, gains: str = "closure_method: {method: penalty, omega_n: 100.0, zeta: 1.0}") -> Scene:
+def star_scene(n_chains: int) -> Scene:
     """``n_chains`` two-link chains from a unit circle whose tips meet at its centre.
 
     The first chain's tip is pinned to every other chain's tip (``n_chains - 1`` hinges, two rows
     each); the mechanism keeps two degrees of freedom. Links 0.6 m, 0.5 kg, ``I = m a^2 / 12``.
-    ``n_chains`` (1 or more) and ``gains`` as ``n_links`` and ``gains`` of :func:`chain_scene`.
+    ``n_chains``: 1 or more.
     """
     if n_chains < 1:
         raise ValueError("n_chains: expected 1 or more")
@@ -95,7 +96,7 @@ def star_scene(n_chains: int, gains: str = "closure_method: {method: penalty, om
         *chains,
         "closures:" + ("" if closures else " []"),
         *closures,
-        gains,
+        GAINS,
         "assemble: {fixed: [c0_base]}",
     ])
     return parse_scene(text, source=f"<star_scene {n_chains}>")

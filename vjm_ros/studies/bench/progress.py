@@ -69,20 +69,18 @@ class BenchProgress:
     ----------
     total : float
         Total estimated work (arbitrary units).
-    stream : file, optional
-        Default ``sys.stderr``.
     enabled : bool
     """
 
-    def __init__(self, total: float, stream=None, enabled: bool = True):
+    def __init__(self, total: float, enabled: bool = True):
         self.total = max(total, 1e-9)
-        self.stream = stream or sys.stderr
+        self.stream = sys.stderr
         self.enabled = enabled
         self.done = 0.0
         self.start = time.perf_counter()
         self.last_draw = 0.0
         self.last_line_frac = -1.0
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.tty = self.stream.isatty()
 
     def advance(self, work: float, label: str = "") -> None:
         """Count ``work`` as done and redraw."""

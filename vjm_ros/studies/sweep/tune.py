@@ -42,7 +42,7 @@ FAILED_STATUSES = ("diverged", "refused (stiffness)")
 
 
 def tuning_spec(scene: str, integrator: str, rate: float, substeps: int,
-                duration: float | None = None, omega_n=OMEGA_N, zeta=ZETA) -> SweepSpec:
+                duration: float | None = None) -> SweepSpec:
     """The sweep of penalty gains for one scene, integrator and step (``duration`` s per run;
     None: the scene's own)."""
     if duration is None:
@@ -52,7 +52,7 @@ def tuning_spec(scene: str, integrator: str, rate: float, substeps: int,
         scenes=[scene],
         settings={"closure": "penalty", "integrator": integrator, "rate": rate,
                   "substeps": substeps},
-        axes={"omega_n": list(omega_n), "zeta": list(zeta)},
+        axes={"omega_n": list(OMEGA_N), "zeta": list(ZETA)},
         duration=duration,
         reference=False,
         source=f"vjm tune {scene}",
@@ -77,9 +77,9 @@ def read_rows(table: str | Path) -> list[dict]:
     return out
 
 
-def pareto_front(rows: list[dict], cost: str = "wall_time",
-                 error: str = "max_closure_error") -> list[dict]:
-    """Rows no other row beats on both cost and error, cheapest first."""
+def pareto_front(rows: list[dict]) -> list[dict]:
+    """Rows no other row beats on both wall time and largest closure error, cheapest first."""
+    cost, error = "wall_time", "max_closure_error"
     ok = sorted((r for r in rows if r.get("status") == "ok" and r.get(cost) is not None
                  and r.get(error) is not None), key=lambda r: (r[cost], r[error]))
     front, best = [], math.inf
@@ -103,14 +103,13 @@ def stability_edge(rows: list[dict]) -> dict[float, float | None]:
     return edges
 
 
-def choose(rows: list[dict], edges: dict[float, float | None] | None = None,
-           margin: float = MARGIN) -> dict | None:
+def choose(rows: list[dict], edges: dict[float, float | None] | None = None) -> dict | None:
     """The row with the smallest largest closure error (then the cheapest) among those that ran
-    with ``omega_n <= edge / margin`` (``edges`` per damping ratio, :func:`stability_edge`;
+    with ``omega_n <= edge / MARGIN`` (``edges`` per damping ratio, :func:`stability_edge`;
     None: no margin), or None."""
     def limit(zeta: float) -> float:
         edge = (edges or {}).get(zeta)
-        return math.inf if edge is None else edge / margin
+        return math.inf if edge is None else edge / MARGIN
 
     ok = [r for r in rows if r.get("status") == "ok" and r.get("max_closure_error") is not None
           and r["omega_n"] <= limit(r["zeta"])]
