@@ -269,7 +269,7 @@ def _settings(args, scene):
 def _tell_compiling(sim) -> bool:
     """Say so on stderr when the kernels run as plain Python while they compile (a first run on
     a machine, :mod:`vjm_ros.jit.tiers`); whether it was said."""
-    if not getattr(sim.mechanism, "compiling", False):
+    if not sim.mechanism.compiling:
         return False
     print("vjm: the compiled kernels are not in numba's cache yet (a first run on this "
           "machine): the run goes on as plain Python while a background process compiles "

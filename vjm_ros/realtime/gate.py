@@ -33,9 +33,6 @@ class Gate:
     @property
     def is_open(self) -> bool:
         """Whether a callback may run now."""
-        return self._may_enter()
-
-    def _may_enter(self) -> bool:
         return self._open and (self._until == math.inf or self._clock() < self._until)
 
     def open(self, until: float = math.inf) -> None:
@@ -55,4 +52,4 @@ class Gate:
     def enter(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s until callbacks may run; False if they still may not."""
         with self._cv:
-            return self._cv.wait_for(self._may_enter, timeout)
+            return self._cv.wait_for(lambda: self.is_open, timeout)

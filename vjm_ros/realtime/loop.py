@@ -309,9 +309,7 @@ class TickLoop:
         """Load the compiled tick and the kernel before the first deadline (the kernel serves
         the first sample of an episode, the singular values and a tick that is not a block)."""
         self.sim.blocks_compiled()
-        warm_up = getattr(self.sim.mechanism, "warm_up", None)
-        if warm_up is not None:
-            warm_up()
+        self.sim.mechanism.warm_up()
 
     def _hold(self) -> None:
         """Keep the initial state until a command arrives, republishing it for late joiners."""

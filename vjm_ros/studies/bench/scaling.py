@@ -81,11 +81,10 @@ def timed_ticks(scene: Scene, integrator: str, settings: dict, grid: Grid) -> in
 
 
 def bare_step_cost(scene: Scene, integrator: str, settings: dict, ticks: int,
-                   repeats: int) -> float | None:
+                   repeats: int) -> float:
     """Median wall time of one bare step, s: ``ticks`` steps of the same method at 1 kHz in one
     compiled call (:meth:`~vjm_ros.core.mechanism.Mechanism.advance_fixed`), nothing observed
-    or stored, no projection. The arithmetic a tick cannot go below; None without the compiled
-    block path.
+    or stored, no projection. The arithmetic a tick cannot go below.
 
     Parameters and returns as :func:`tick_cost`.
     """
@@ -93,9 +92,7 @@ def bare_step_cost(scene: Scene, integrator: str, settings: dict, ticks: int,
     for _ in range(max(repeats, 1)):
         sim = Simulator(scene.model, SimulationSettings(integrator=integrator, rate=1000.0,
                                                         **settings), scene.gains)
-        method = getattr(sim.integrator, "kernel_method", None)
-        if method is None or not hasattr(sim.mechanism, "advance_fixed"):
-            return None
+        method = sim.integrator.kernel_method
         q, qd, tau = sim.q, sim.qd, sim.tau
         sim.mechanism.advance_fixed(method, q, qd, tau, sim.dt, 1)  # warm-up
         t0 = time.perf_counter()

@@ -151,7 +151,7 @@ def check_scheduler(address: str, timeout: float = CLUSTER_TIMEOUT) -> None:
 
     try:
         reply = asyncio.run(identity())
-    except (TimeoutError, asyncio.TimeoutError):
+    except TimeoutError:
         raise ConfigurationError(
             f"{where}: expected a Dask scheduler to answer within {timeout:g} s "
             "(--cluster-timeout), found no answer: is it a Dask scheduler's address?") from None
