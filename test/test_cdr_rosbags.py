@@ -2,9 +2,10 @@
 
 rosbags (a third-party ROS bag library) builds its serializer from the ROS 2 Kilted message
 definitions, the same ones the logs' schemas come from (:mod:`vjm_ros.logs.msgdefs`). Here the
-rosbags message objects are built by this test's own code from the message dicts, serialized by
-rosbags, and compared byte for byte with :func:`vjm_ros.logs.cdr.encode` and with the per-tick
-fast paths, on messages of a real run; the schema texts name exactly the fields rosbags knows.
+rosbags message objects are built by the tests' own code from the message dicts
+(``test/rosbags_cdr.py``), serialized by rosbags, and compared byte for byte with the package's
+one encoder of each type, on messages of a real run; the schema texts name exactly the fields
+rosbags knows.
 """
 
 from __future__ import annotations
@@ -12,33 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import four_bar_samples
-from rosbags.typesys import Stores, get_typestore
-from rosbags.typesys.store import Nodetype
+from rosbags_cdr import TYPESTORE, serialize
 
 from vjm_ros.logs import cdr, messages, msgdefs
-
-TYPESTORE = get_typestore(Stores.ROS2_KILTED)
-_NUMPY = {"float64": np.float64, "float32": np.float32, "int32": np.int32, "uint32": np.uint32,
-          "uint8": np.uint8, "int8": np.int8, "int64": np.int64, "uint64": np.uint64}
-
-
-def build(type_name: str, value: dict):
-    """The rosbags message of ``type_name`` holding the fields of a message dict."""
-    _, fields = TYPESTORE.fielddefs[type_name]
-    kwargs = {name: _field(desc, value[name]) for name, desc in fields}
-    return TYPESTORE.types[type_name](**kwargs)
-
-
-def _field(desc, value):
-    kind, detail = desc
-    if kind == Nodetype.NAME:
-        return build(detail, value)
-    if kind == Nodetype.BASE:
-        return value
-    (sub_kind, sub_detail), _ = detail  # a sequence or an array
-    if sub_kind == Nodetype.BASE and sub_detail[0] in _NUMPY:
-        return np.asarray(value, dtype=_NUMPY[sub_detail[0]])
-    return [_field((sub_kind, sub_detail), v) for v in value]
 
 
 @pytest.fixture(scope="module")
@@ -60,11 +37,32 @@ def test_every_logged_type_is_covered(sample_messages):
     assert {t for t, _ in sample_messages} == set(msgdefs.LOGGED_TYPES)
 
 
-def test_encode_matches_rosbags_byte_for_byte(sample_messages):
+def _encoded(type_name: str, value: dict) -> bytes:
+    """A message dict through the package's one encoder of its type."""
+    stamp = value.get("header", {}).get("stamp")
+    ns = stamp["sec"] * 10**9 + stamp["nanosec"] if stamp else None
+    if type_name == messages.JOINT_STATE:
+        return cdr.joint_state_encoder(value["name"])(
+            ns, np.array(value["position"]), np.array(value["velocity"]), np.array(value["effort"]))
+    if type_name == messages.FLOAT64_MULTI_ARRAY:
+        return cdr.multi_array_encoder(value["layout"], len(value["data"]))(
+            np.array(value["data"]))
+    if type_name == messages.WRENCH_STAMPED:
+        w = value["wrench"]
+        return cdr.wrench_stamped_encoder()(ns, w["force"]["x"], w["force"]["y"],
+                                            w["torque"]["z"])
+    if type_name == messages.CLOCK:
+        return cdr.encode_clock(value["clock"]["sec"] * 10**9 + value["clock"]["nanosec"])
+    if type_name == messages.STRING:
+        return cdr.encode_string(value["data"])
+    return cdr.encode_markers(value)
+
+
+def test_every_encoder_matches_rosbags_byte_for_byte(sample_messages):
     for type_name, value in sample_messages:
-        ours = cdr.encode(type_name, value)
-        theirs = bytes(TYPESTORE.serialize_cdr(build(type_name, value), type_name))
-        assert ours == theirs, type_name
+        assert _encoded(type_name, value) == serialize(type_name, value), type_name
+    for text in ("", "a", "abc", "abcd", "ü ∑ reset"):  # every length modulo 4, and UTF-8
+        assert cdr.encode_string(text) == serialize(messages.STRING, messages.event(text)), text
 
 
 @pytest.mark.parametrize("ticks", [1, 10])
@@ -77,8 +75,7 @@ def test_fast_paths_match_rosbags_byte_for_byte(ticks):
     forces = cdr.multi_array_encoder(layout, 3 * len(model.closures))
     wrench = cdr.wrench_stamped_encoder()
 
-    def rosbags(type_name, value):
-        return bytes(TYPESTORE.serialize_cdr(build(type_name, value), type_name))
+    rosbags = serialize
 
     for s, ns in zip(samples, (0, 999_999_999, 4_294_967_297_123, 7 * 10**15), strict=False):
         assert joints(ns, s.q, s.qd, s.effort) == rosbags(

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from rosbags_cdr import serialize
+from test_cdr_rosbags import _encoded as encoded
 
 from vjm_ros.logs import Timebase, cdr, finalize_on_signals, messages, msgdefs
 from vjm_ros.logs.mcap_recorder import McapRecorder
@@ -202,20 +204,20 @@ def test_rerun_reads_the_log(log, tmp_path):
 
 
 def test_fast_encoders_equal_rosbags_serializer(run):
-    """The per-tick fast paths write what rosbags' serializer (behind cdr.encode) writes."""
+    """The per-tick fast paths write what rosbags' serializer writes."""
     scene, _, first, _ = run
     model, s, ns = scene.model, first[-1], 1_234_567_890_123
     js = cdr.joint_state_encoder(model.joint_names)(ns, s.q, s.qd, s.effort)
-    assert js == cdr.encode(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns))
+    assert js == serialize(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns))
     layout = messages.labelled_layout(model.closure_names, 3)
     fa = cdr.multi_array_encoder(layout, 3 * len(model.closures))(s.closure_force.reshape(-1))
-    assert fa == cdr.encode(
+    assert fa == serialize(
         messages.FLOAT64_MULTI_ARRAY, messages.constraint_forces(model.closure_names, s)
     )
     fx, fy, mz = s.closure_force[0]
     w = cdr.wrench_stamped_encoder()(ns, fx, fy, mz)
-    assert w == cdr.encode(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns))
-    assert cdr.encode_clock(ns) == cdr.encode(messages.CLOCK, messages.clock(ns))
+    assert w == serialize(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns))
+    assert cdr.encode_clock(ns) == serialize(messages.CLOCK, messages.clock(ns))
 
 
 def test_rclpy_decodes_the_encoded_messages(run):
@@ -228,14 +230,14 @@ def test_rclpy_decodes_the_encoded_messages(run):
 
     scene, _, first, _ = run
     model, s, ns = scene.model, first[7], 3_000_000_001
-    decode = serialization.deserialize_message
+    decode = serialization.deserialize_message  # the package's encoders, read by rclpy
     js = decode(
-        cdr.encode(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns)), JointState
+        encoded(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns)), JointState
     )
     assert list(js.name) == model.joint_names and list(js.position) == s.q.tolist()
     assert (js.header.stamp.sec, js.header.stamp.nanosec) == (3, 1)
     fa = decode(
-        cdr.encode(
+        encoded(
             messages.FLOAT64_MULTI_ARRAY, messages.constraint_forces(model.closure_names, s)
         ),
         Float64MultiArray,
@@ -244,11 +246,11 @@ def test_rclpy_decodes_the_encoded_messages(run):
         fa.layout.dim[0].label == "tip_pin"
         and list(fa.data) == s.closure_force.reshape(-1).tolist()
     )
-    w = decode(cdr.encode(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns)), WrenchStamped)
+    w = decode(encoded(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns)), WrenchStamped)
     assert w.wrench.force.y == s.closure_force[0, 1]
     assert decode(cdr.encode_clock(ns), Clock).clock.nanosec == 1
-    assert decode(cdr.encode(messages.STRING, messages.event("reset")), String).data == "reset"
-    ma = decode(cdr.encode(messages.MARKER_ARRAY, messages.markers(s, ns)), MarkerArray)
+    assert decode(encoded(messages.STRING, messages.event("reset")), String).data == "reset"
+    ma = decode(encoded(messages.MARKER_ARRAY, messages.markers(s, ns)), MarkerArray)
     assert [m.type for m in ma.markers] == [5, 7, 0]
     assert ma.markers[1].points[-1].x == s.points[-1, 0]
 

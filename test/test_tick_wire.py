@@ -160,7 +160,7 @@ def test_node_bytes_are_the_logs_bytes_rosbags_and_rclpy(scene_name):
     encoders and rosbags' serializer byte for byte, and rclpy's ``serialize_message`` in every
     byte but padding (the one difference from rosbags: an empty ``Float64MultiArray.data``,
     which rclpy pads to 8 bytes)."""
-    from test_cdr_rosbags import TYPESTORE, build  # the test's own rosbags message builder
+    from rosbags_cdr import TYPESTORE, build  # the tests' own rosbags message builder
 
     from vjm_ros.logs import cdr, messages
 

@@ -1,18 +1,17 @@
 """CDR (XCDR1, little endian) encoding of the messages the logs and the node carry.
 
-:func:`encode` serializes any message dict of :mod:`vjm_ros.logs.messages` with rosbags'
-schema-driven serializer (the ROS 2 Kilted definitions of :mod:`vjm_ros.logs.msgdefs`). Each
-message of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchStamped``,
+Each message of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchStamped``,
 ``Clock`` and the decimated ``MarkerArray``) has one byte layout here, a :class:`FixedLayout`
 written by :class:`CdrWriter`: its bytes with zero stamps and numbers and the offsets of both.
 The node refills a copy of it in place (:class:`vjm_ros.ros.wire.TickWire`,
 :class:`vjm_ros.ros.wire.MarkerWire`, published as bytes), the recorder packs one message
 (:attr:`FixedLayout.packer`, behind :func:`joint_state_encoder` and its siblings) or a whole
-block (:mod:`vjm_ros.logs.mcap_block`). Measured here in one run
-(``pytest -m bench test/bench_logging.py``): a JointState of three joints costs 1.7 us on its
-fast path against 12-14 us through rosbags from the dict, a WrenchStamped 0.4 us against
-12-17 us, the four-bar's MarkerArray 29 us against 140-155 us. test/test_cdr_rosbags.py checks
-every layout against rosbags and rclpy byte for byte. CDR layout, for reading the code: every
+block (:mod:`vjm_ros.logs.mcap_block`); the events' ``String`` is :func:`encode_string`.
+Measured here in one run (``pytest -m bench test/bench_logging.py``): a JointState of three
+joints costs 1.7 us on its fast path against 12-14 us through rosbags' schema-driven serializer
+from the dict, a WrenchStamped 0.4 us against 12-17 us, the four-bar's MarkerArray 29 us
+against 140-155 us. test/test_cdr_rosbags.py checks every layout against rosbags and rclpy
+byte for byte. CDR layout, for reading the code: every
 primitive is aligned to its size, counted from the end of the 4-byte encapsulation header;
 strings are a ``uint32`` length that counts the terminating NUL, then the bytes and the NUL;
 sequences are a ``uint32`` count, then the elements.
@@ -32,60 +31,6 @@ _U32 = struct.Struct("<I").pack
 _I32 = struct.Struct("<i").pack
 _F32X4 = struct.Struct("<4f").pack
 _ZEROS = bytes(8)
-
-
-@functools.cache
-def _typestore():
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_KILTED)
-
-
-_NUMPY = {
-    "float64": np.float64, "float32": np.float32, "int8": np.int8, "uint8": np.uint8,
-    "int16": np.int16, "uint16": np.uint16, "int32": np.int32, "uint32": np.uint32,
-    "int64": np.int64, "uint64": np.uint64,
-}
-
-
-def to_message(type_name: str, value: dict):
-    """The rosbags message object of ``type_name`` holding the fields of a message dict.
-
-    Parameters
-    ----------
-    type_name : str
-        Full ROS 2 type name.
-    value : dict
-        Fields as built by :mod:`vjm_ros.logs.messages` (nested dicts, lists of numbers).
-    """
-    from rosbags.typesys.store import Nodetype
-
-    def field(desc, v):
-        kind, detail = desc
-        if kind == Nodetype.NAME:
-            return to_message(detail, v)
-        if kind == Nodetype.BASE:
-            return v
-        (sub_kind, sub_detail), _ = detail  # a sequence or an array
-        if sub_kind == Nodetype.BASE and sub_detail[0] in _NUMPY:
-            return np.asarray(v, dtype=_NUMPY[sub_detail[0]])
-        return [field((sub_kind, sub_detail), x) for x in v]
-
-    store = _typestore()
-    _, fields = store.fielddefs[type_name]
-    return store.types[type_name](**{name: field(desc, value[name]) for name, desc in fields})
-
-
-def encode(type_name: str, message: dict) -> bytes:
-    """Serialize a message dict to CDR with rosbags' serializer (ROS 2 Kilted definitions);
-    arguments as :func:`to_message`.
-
-    Returns
-    -------
-    bytes
-        Encapsulation header and payload.
-    """
-    return bytes(_typestore().serialize_cdr(to_message(type_name, message), type_name))
 
 
 # ---------------------------------------------------------------- markers, by hand
@@ -418,6 +363,13 @@ def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, flo
 
 _CLOCK = CLOCK_LAYOUT.packer[0].pack
 _CLOCK_PIECES = CLOCK_LAYOUT.packer[1]
+
+
+def encode_string(text: str) -> bytes:
+    """``std_msgs/String`` holding ``text`` (the events)."""
+    w = CdrWriter()
+    w.string(text)
+    return w.getvalue()
 
 
 def encode_clock(ns: int) -> bytes:

@@ -259,8 +259,8 @@ class McapRecorder(Recorder):
         self.bag.note(self._records[channel], ns)
         self.message_count += 1
 
-    def _add(self, topic: str, type_name: str, message: dict, ns: int) -> None:
-        self._put(self._channels[topic], cdr.encode(type_name, message), ns)
+    def _event(self, text: str, ns: int) -> None:
+        self._put(self._channels[self.topics.events], cdr.encode_string(text), ns)
 
     @atomic
     def write(self, sample) -> None:
@@ -338,7 +338,7 @@ class McapRecorder(Recorder):
         """Log ``text`` on ``/<node>/events`` at the latest recording time."""
         self._check_open()
         ns = self.timebase.last_ns or 0
-        self._add(self.topics.events, messages.STRING, messages.event(text), ns)
+        self._event(text, ns)
 
     @atomic
     def note_reset(self, t: float | None = None) -> None:
@@ -356,7 +356,7 @@ class McapRecorder(Recorder):
         ns = self.timebase.reset(t)
         ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
         text = events.reset_line(ended * 1e-9, ns * 1e-9)
-        self._add(self.topics.events, messages.STRING, messages.event(text), ns)
+        self._event(text, ns)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
 
     def _maybe_flush(self, ns: int) -> None:
