@@ -21,7 +21,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError
@@ -239,8 +239,7 @@ class Sweep:
         done = self.start.done
         self.todo = [c for c in self.plan.cases if c.key not in done]
 
-    def run(self, engine: Engine, progress: bool = True,
-            on_row: Callable[[dict], None] | None = None) -> dict:
+    def run(self, engine: Engine, progress: bool = True) -> dict:
         """Run the rows not in the table yet on ``engine``, writing each as it arrives.
 
         Returns
@@ -287,8 +286,6 @@ class Sweep:
             written["n"] += 1
             written["failed"] += status != "ok"
             written["errors"] += status == FAILED
-            if on_row is not None:
-                on_row(row)
 
         def put_copies(writer, row: dict) -> None:
             for case in copies.pop(row["key"], []):
@@ -361,15 +358,13 @@ def run_sweep(
     engine: Engine,
     resume: bool = False,
     progress: bool = True,
-    on_row: Callable[[dict], None] | None = None,
-    overwrite: bool = False,
 ) -> dict:
     """Check ``spec``, then run every case not yet in ``out`` and write the table.
 
     See :class:`Sweep` (the checks, before anything is written) and :meth:`Sweep.run` (the
     summary returned).
     """
-    return Sweep(spec, out, resume, overwrite).run(engine, progress, on_row)
+    return Sweep(spec, out, resume).run(engine, progress)
 
 
 def _run_batch(cases: list[Case], scene_text: tuple[str, str], reference) -> list[dict]:
