@@ -24,15 +24,9 @@ def sections(text: str) -> dict[str, str]:
 
 
 def section(text: str, heading: str) -> str | None:
-    """The section of a Markdown page that starts with the line ``heading``, up to the next
+    """The section of a Markdown page whose line is ``heading`` (``## ...``), up to the next
     ``## `` heading (without it); None when the page has none."""
-    lines = text.splitlines(keepends=True)
-    starts = [i for i, ln in enumerate(lines) if ln.rstrip("\n") == heading]
-    if not starts:
-        return None
-    end = next((i for i in range(starts[0] + 1, len(lines)) if lines[i].startswith("## ")),
-               len(lines))
-    return "".join(lines[starts[0] : end])
+    return sections(text).get(heading[3:].strip())
 
 
 def with_section(text: str, heading: str, body: str) -> str:
