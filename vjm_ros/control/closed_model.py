@@ -51,12 +51,12 @@ from pathlib import Path
 import numpy as np
 
 from vjm_ros.control.arguments import number_array, real, vector
-from vjm_ros.control.compiled import velocity_map
+from vjm_ros.control.compiled import preload_direction, velocity_map
 from vjm_ros.control.distribution import (
+    check_one_null_dimension,
     check_preload,
     distribute,
     inverse_weights,
-    preload_direction,
 )
 from vjm_ros.control.errors import (
     InfeasibleEffortsError,
@@ -122,7 +122,7 @@ class ReducedDynamics:
     preload_direction : ndarray, shape (m,), or None
         ``z``, the oriented direction of the efforts that move nothing (``P z = 0``,
         ``max |z_k| = 1``, continuous along a motion:
-        :func:`~vjm_ros.control.distribution.preload_direction`); None unless there is one
+        :func:`~vjm_ros.control.compiled.preload_direction`); None unless there is one
         actuator more than degrees of freedom.
     """
 
@@ -209,6 +209,7 @@ class ClosedChainModel:
         self._dependent = np.array(self.dependent, dtype=np.int64)
         self._compiled_id = None
         self.actuated = [a.joint for a in model.actuators]
+        self._actuated = np.array(self.actuated, dtype=np.int64)
         self.limits = np.array([a.limit for a in model.actuators], dtype=float)
         self.selection = model.actuator_matrix()
         self._row_closure = [c.name for c in model.closures for _ in range(c.rows)]
@@ -438,8 +439,11 @@ class ClosedChainModel:
         m_r = s_map.T @ full.mass_matrix @ s_map
         g_r = s_map.T @ still.bias
         c_r = s_map.T @ (full.mass_matrix @ s + full.bias - still.bias)
-        direction = (preload_direction(a, self.selection)
-                     if len(self.actuated) == self.dof + 1 else None)
+        direction = None
+        if len(self.actuated) == self.dof + 1:
+            direction = np.empty(len(self.actuated))
+            check_one_null_dimension(self.n - a.shape[0], len(self.actuated))
+            preload_direction(np.ascontiguousarray(a), self._actuated, direction)
         return ReducedDynamics(m_r, c_r, g_r, s_map, s, s_map.T @ self.selection, direction)
 
     def inverse_dynamics(

@@ -134,7 +134,7 @@ def preload_direction(jac, actuated, z):
     The efforts' part of the generalized cross product of the rows of ``N = [A^T B]``
     (n x (n + 1); ``A = jac`` (r, n), ``B`` selects the ``actuated`` coordinates (m,), with
     ``r + m = n + 1``): ``z_k = (-1)^(n+r+k) det(N without column r + k)``, scaled to
-    ``max |z_k| = 1`` (:func:`vjm_ros.control.distribution.preload_direction`).
+    ``max |z_k| = 1`` (:mod:`vjm_ros.control.distribution` says why this orientation).
     """
     r, n = jac.shape
     m = actuated.shape[0]

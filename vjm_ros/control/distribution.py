@@ -13,7 +13,7 @@ of ``N = [A^T B]`` (n x (r + m), with ``r + m = n + 1``), whose direction is the
 cross product* of the rows of ``N``: ``y_k = (-1)^(n+k) det(N without column k)``, the one
 direction with ``det([N; y^T]) > 0`` (the determinant is ``sum_k y_k^2``). The preload direction
 ``z`` is the efforts' part of ``y`` (its last ``m`` components), scaled so that
-``max_k |z_k| = 1`` (:func:`preload_direction`). It is a polynomial in ``A`` and ``B``, functions
+``max_k |z_k| = 1`` (:func:`vjm_ros.control.compiled.preload_direction`). It is a polynomial in ``A`` and ``B``, functions
 of the pose alone, so it changes continuously along a motion wherever the actuators can balance
 every load (``N`` of full rank), and it does not depend on the choice of independent
 coordinates: a given ``preload`` means the same antagonism everywhere. (An SVD's null vector
@@ -44,7 +44,7 @@ def null_direction(p: np.ndarray) -> np.ndarray:
     ``z_k = (-1)^(d+k) det(P without column k)``, scaled to ``max |z_k| = 1``: ``P z = 0`` and
     ``det([P; z^T]) > 0``. Its orientation is relative to ``P``, which depends on the independent
     coordinates: along a motion it reverses with the sign of ``det(A_v)`` (module docstring).
-    :func:`preload_direction` is the one continuous along a motion.
+    :func:`vjm_ros.control.compiled.preload_direction` is the one continuous along a motion.
 
     Parameters
     ----------
@@ -57,38 +57,14 @@ def null_direction(p: np.ndarray) -> np.ndarray:
         Dimensionless.
     """
     d, m = p.shape
-    _check_one_null_dimension(d, m)
+    check_one_null_dimension(d, m)
     z = np.array([(-1.0) ** (d + k) * np.linalg.det(np.delete(p, k, axis=1))
                   for k in range(m)])
     return z / np.max(np.abs(z))
 
 
-def preload_direction(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The oriented direction of the efforts that the closures balance (module docstring).
-
-    Parameters
-    ----------
-    a : ndarray, shape (r, n)
-        Closure Jacobian ``A`` (full row rank).
-    b : ndarray, shape (n, m)
-        Actuator matrix ``B`` (``qdd`` space from efforts), ``m = n - r + 1``.
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        ``z`` with ``S^T B z = 0`` and ``max |z_k| = 1``: the efforts' part of the generalized
-        cross product of the rows of ``[A^T B]`` (``det([[A^T B]; y^T]) > 0``); dimensionless.
-    """
-    r, n = a.shape
-    m = b.shape[1]
-    _check_one_null_dimension(n - r, m)
-    full = np.hstack((a.T, b))
-    z = np.array([(-1.0) ** (n + r + k) * np.linalg.det(np.delete(full, r + k, axis=1))
-                  for k in range(m)])
-    return z / np.max(np.abs(z))
-
-
-def _check_one_null_dimension(d: int, m: int) -> None:
+def check_one_null_dimension(d: int, m: int) -> None:
+    """Refuse ``m`` actuators for ``d`` degrees of freedom unless ``m = d + 1``."""
     if m != d + 1:
         raise ConfigurationError(
             f"preload: expected one actuator more than degrees of freedom (a one-dimensional "
@@ -154,7 +130,7 @@ def distribute(p: np.ndarray, w: np.ndarray, limits: np.ndarray, weights=None,
         The actuators' joint names, for the messages (default ``actuator 0``, ...).
     direction : ndarray, shape (m,), optional
         ``z``: pass :attr:`ReducedDynamics.preload_direction
-        <vjm_ros.control.closed_model.ReducedDynamics>` (:func:`preload_direction`), the
+        <vjm_ros.control.closed_model.ReducedDynamics>`, the
         orientation continuous along a motion; default :func:`null_direction` of ``P``, whose
         orientation is relative to ``P`` only.
 
