@@ -112,15 +112,14 @@ def raw_publish(publisher) -> Callable[[bytes], None]:
     message's ~45 us on a slow machine, five to seven times per tick in the node. The returned
     function is ``publish_raw`` itself; the caller publishes from one thread and destroys the
     publisher only after its last call (the node: its tick loop, which rebuilds these functions
-    when a reset rebuilds a publisher). A publisher without it gets its ``publish``.
+    when a reset rebuilds a publisher).
 
     Returns
     -------
     callable
         ``f(data: bytes)``: publish one CDR-serialized message of the publisher's type.
     """
-    raw = getattr(getattr(publisher, "handle", None), "publish_raw", None)
-    return raw if callable(raw) else publisher.publish
+    return publisher.handle.publish_raw
 
 
 def take_all(subscriptions) -> list:
