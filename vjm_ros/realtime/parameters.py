@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, fields, make_dataclass, replace
 
 from vjm_ros.core.errors import ConfigurationError, StiffnessError
 from vjm_ros.core.integrators import INTEGRATORS
@@ -133,32 +133,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
 SPECS = {p.name: p for p in PARAMETERS}
 
 
-@dataclass(frozen=True)
-class NodeConfig:
-    """Validated parameter values (see :data:`PARAMETERS` for meanings and units)."""
-
-    scene: str = "four_bar"
-    rate_hz: float = 0.0
-    substeps: int = 0
-    integrator: str = ""
-    closure: str = ""
-    kp: float = -1.0
-    kv: float = -1.0
-    kernel: str = "auto"
-    realtime: bool = True
-    duration: float = 0.0
-    mcap: str = ""
-    rrd: str = ""
-    publish_clock: bool = True
-    command_timeout: float = 0.5
-    publish_rate_hz: float = 0.0
-    forces_rate_hz: float = 0.0
-    lockstep: bool = False
-    lockstep_timeout: float = 1.0
-    marker_rate_hz: float = 30.0
-    wait_for_command: bool = False
-    realtime_priority: int = 0
-    start_paused: bool = False
+class _Config:
+    """Validated parameter values (see :data:`PARAMETERS` for meanings and units): one field per
+    parameter, its default the parameter's (:class:`NodeConfig` is made from the table)."""
 
     @classmethod
     def from_values(cls, values: Mapping[str, object]) -> NodeConfig:
@@ -189,6 +166,12 @@ class NodeConfig:
             for f in fields(self)
             if getattr(self, f.name) != getattr(other, f.name)
         }
+
+
+NodeConfig = make_dataclass("NodeConfig", [(p.name, type(p.default), p.default) for p in PARAMETERS],
+                            bases=(_Config,), frozen=True)
+NodeConfig.__module__ = __name__
+NodeConfig.__doc__ = _Config.__doc__
 
 
 def _check(spec: ParamSpec, value: object) -> bool | int | float | str:
