@@ -287,7 +287,7 @@ def _cmd_run(args) -> int:
     from vjm_ros.scene.loader import load_scene
     from vjm_ros.sim.samples import RUN_BLOCK_TICKS
     from vjm_ros.sim.simulator import Simulator
-    from vjm_ros.sim.trajectory import Trajectory
+    from vjm_ros.sim.trajectory import Trajectory, prepare_csv_writer
 
     scene = load_scene(args.scene)
     settings = _settings(args, scene)
@@ -317,6 +317,8 @@ def _cmd_run(args) -> int:
     code, error = 0, None
     outputs = None
     told = False
+    if args.out is not None:  # loading the CSV's compiled writer is start-up too
+        prepare_csv_writer(ticks + 1)
     if preloading is not None:  # library imports are start-up, like loading compiled code
         preloading.join()
     wall0, loading0 = time.perf_counter(), tiers.loading_seconds()
