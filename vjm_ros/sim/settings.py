@@ -16,11 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from vjm_ros.core.compiled import KERNELS
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.core.integrators import make_integrator
-
-KERNELS = ("auto", "numba")
-"""Accepted values of :attr:`SimulationSettings.kernel`."""
 
 
 @dataclass(frozen=True)

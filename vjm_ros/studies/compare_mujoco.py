@@ -49,10 +49,6 @@ KNOWN_BAD_VERSIONS = {
 }
 """Versions with a known defect that matters for this comparison, and why."""
 
-INTEGRATORS = ("Euler", "implicitfast", "RK4")
-"""MuJoCo integrators compared (MJCF spelling)."""
-
-
 
 def import_mujoco() -> ModuleType | None:
     """The :mod:`mujoco` module, or None when it is not installed."""

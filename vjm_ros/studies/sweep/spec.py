@@ -34,10 +34,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from vjm_ros.core.compiled import KERNELS
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.core.integrators import INTEGRATORS
 from vjm_ros.scene.safe_yaml import parse_yaml
-from vjm_ros.sim.settings import KERNELS, SimulationSettings
+from vjm_ros.sim.settings import SimulationSettings
 
 SETTINGS = (
     "integrator", "closure", "rate", "substeps", "kp", "kv", "omega_n", "zeta", "alpha", "beta",
