@@ -120,7 +120,7 @@ class BenchProgress:
             self.stream.flush()
 
 
-def _work(cfg: RowConfig, horizon: float, model_n: int) -> float:
+def _work(cfg: RowConfig, horizon: float) -> float:
     """Rough cost of one run, in model evaluations (for the progress estimate)."""
     if cfg.engine == "mujoco":
         return 0.02 * horizon * cfg.rate * cfg.substeps

@@ -145,7 +145,8 @@ def run_scaling(grid: Grid, repeats: int, progress: BenchProgress | None = None,
                     row[key] = None
                     row.setdefault("errors", {})[key] = str(exc)
                 if progress:
-                    progress.advance(_scaling_work(scene, integ, grid, repeats) / len(methods) * 3,
+                    progress.advance(scaling_work(scene.model.n, integ, grid, repeats)
+                                     / len(methods) * 3,
                                      f"scaling {family} {size}")
             if family == "links" and size == 1:  # enough ticks to time a step of 0.1 us
                 ticks = max(grid.scaling_ticks, ONE_LINK_TICKS)
@@ -164,6 +165,7 @@ def _scaling_keys(scaling: dict) -> list[str]:
     return scaling.get("methods") or [f"{i} {s['closure']}" for i, s in SCALING_METHODS]
 
 
-def _scaling_work(scene: Scene, integ: str, grid: Grid, repeats: int) -> float:
+def scaling_work(n: int, integ: str, grid: Grid, repeats: int) -> float:
+    """Rough cost of timing one method on a scene of ``n`` coordinates (for the progress bar)."""
     stages = 4.0 if integ == "rk4" else 1.0
-    return stages * (grid.scaling_ticks + 1) * max(repeats, 1) * (1 + scene.model.n / 8)
+    return stages * (grid.scaling_ticks + 1) * max(repeats, 1) * (1 + n / 8)

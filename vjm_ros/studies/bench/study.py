@@ -70,6 +70,7 @@ from vjm_ros.studies.bench.runs import (
 from vjm_ros.studies.bench.scaling import (
     SCALING_METHODS,
     run_scaling,
+    scaling_work,
 )
 
 
@@ -91,14 +92,13 @@ def _plan(opts: BenchOptions, grid, scenes: list, use_mujoco: bool) -> tuple[lis
         plan.append((sc, horizon, rows))
         total += 2 * 6000.0 * horizon  # reference and its check
         for cfg in rows:
-            total += _work(cfg, horizon, sc.model.n) * (1 + max(opts.repeats - 1, 0))
+            total += _work(cfg, horizon) * (1 + max(opts.repeats - 1, 0))
     if opts.scaling:
         for family, sizes in (("links", grid.scaling_links), ("chains", grid.scaling_chains)):
             for size in sizes:
                 n = size if family == "links" else 2 * size
-                for integ, _ in SCALING_METHODS:
-                    stages = 4.0 if integ == "rk4" else 1.0
-                    total += stages * (grid.scaling_ticks + 1) * max(opts.repeats, 1) * (1 + n / 8)
+                total += sum(scaling_work(n, integ, grid, opts.repeats)
+                             for integ, _ in SCALING_METHODS)
     return plan, total
 
 
@@ -125,7 +125,7 @@ def _scene_rows(sc, horizon: float, rows: list, ref, engine, progress, repeats: 
     for i, cfg in enumerate(rows):
         res = futures[i].result() if engine is not None else runners[i](sc, cfg, horizon, ref)
         out_rows.append(res)
-        progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: {cfg.label()}")
+        progress.advance(_work(cfg, horizon), f"{sc.name}: {cfg.label()}")
     for _ in range(max(repeats - 1, 0)):
         for cfg, res in zip(rows, out_rows, strict=True):
             if res.ok:
@@ -136,7 +136,7 @@ def _scene_rows(sc, horizon: float, rows: list, ref, engine, progress, repeats: 
                     res.cpu_samples.append(cpu_s)
                 except (VjmError, np.linalg.LinAlgError, FloatingPointError) as exc:
                     res.message = f"a timing repeat failed: {exc}"
-            progress.advance(_work(cfg, horizon, sc.model.n), f"{sc.name}: timing {cfg.label()}")
+            progress.advance(_work(cfg, horizon), f"{sc.name}: timing {cfg.label()}")
     for res in out_rows:
         _finish_timing(res)
     return out_rows
