@@ -314,3 +314,22 @@ def test_the_summary_ledger_of_a_run_with_impacts_falls_with_the_step():
     # first order (the stops act once per step): measured 8.4e-3, 3.2e-3, 8.9e-4 J
     assert residual[0] < 2e-2
     assert residual[0] / residual[1] > 2.0 and residual[1] / residual[2] > 2.0
+
+
+@pytest.mark.parametrize("integrator", ["explicit_euler", "semi_implicit_euler", "rk4",
+                                        "implicit_euler"])
+def test_a_rod_bouncing_on_its_stop_comes_to_rest(integrator):
+    """With e = 0.5 the bounces shrink until a rebound is one that gravity undoes within two
+    steps; from there the rod rests on the stop, held by the moment statics asks (m g p
+    cos(stop)) at every tick. Without the threshold rk4 chattered at the step's period (an
+    impact at h |a| every other tick, the stop's moment alternating between 0 and half of it),
+    explicit Euler every third step."""
+    scene = parse_scene(ROD % (0.0, f"range: [{STOP}, 3.0], restitution: 0.5"))
+    samples = _samples(scene, 3.0, integrator=integrator)
+    rest = samples[-1000:]  # the bounces are over well before 2 s (e^k of 4 rad/s)
+    assert max(abs(s.q[0] - STOP) for s in rest) < 1e-12
+    assert max(abs(s.qd[0]) for s in rest) < 1e-9
+    np.testing.assert_allclose([s.closure_force[0, 2] for s in rest], MGP * np.cos(STOP),
+                               rtol=1e-9)
+    # no impact any more (what the resting stop's effort removes is round-off, ~1e-20 J)
+    assert max(s.joint_loss for s in rest) < 1e-12

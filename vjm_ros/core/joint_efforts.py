@@ -19,7 +19,12 @@ stages):
   stop (``q_k <= lo``) gets an effort ``s_k >= 0`` that keeps ``u_k >= 0`` (it rests there or
   leaves); a step that carries the joint past its stop ends with the **impact**
   (:func:`stop_impacts`): the coordinate is set on the stop and the rate reversed to
-  ``-e qd_k`` by an impulse through ``W``;
+  ``-e qd_k`` by an impulse through ``W``; a rebound that what pushes the joint into its stop
+  would undo within two steps (``e |qd_k| < 2 |qd_k - qd_k(start)|``, the step's change of
+  rate) is below what a first-order step resolves (explicit Euler's position lags its rate by
+  a step): the joint rests instead (``e = 0``), as a bouncing body comes to rest after its
+  shrinking bounces. Without the threshold a joint never came to rest: it chattered, leaving
+  the stop and hitting it again every few steps (engines threshold bounces by speed alike);
 * the problem is solved by projected Gauss-Seidel sweeps (exact for one joint, converged to
   :data:`SWEEP_TOLERANCE` for several).
 
@@ -200,10 +205,12 @@ def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, l
 
 
 @_jit(allocates=False)
-def stop_impacts(q, qd, lflt, wcols):
+def stop_impacts(q, qd, lflt, wcols, start):
     """Set every coordinate carried past a stop over the step back on it, moving the others by
     ``W``'s row so that the closures hold to first order, and reverse its rate to ``-e qd_k`` by
-    an impulse through ``W`` (the rows :func:`joint_efforts` left in ``wcols``).
+    an impulse through ``W`` (the rows :func:`joint_efforts` left in ``wcols``); ``e = 0`` for
+    a rebound smaller than the step's change of rate (module docstring; ``start``: the rates
+    at the start of the step).
 
     Returns
     -------
@@ -227,21 +234,25 @@ def stop_impacts(q, qd, lflt, wcols):
             continue
         w = wcols[k, k]
         sign = 1.0 if past > 0.0 else -1.0
+        before = qd[k]
+        e = lflt[k, F_RESTITUTION]
+        if e * abs(before) < 2.0 * abs(before - start[k]):  # a rebound no step resolves
+            e = 0.0
         if not w > 1e-12:
             # no row of W: _needed saw the joint beyond twice this step's reach of its stop, so
             # this does not happen on a step that ends past it; should it, this joint alone
             # (its kinetic energy then not in the ledger)
             q[k] = lo if past > 0.0 else hi
             if sign * qd[k] < 0.0:
-                qd[k] = -lflt[k, F_RESTITUTION] * qd[k]
+                qd[k] = -e * qd[k]
             continue
         for j in range(n):  # back on the stop, the closures kept to first order (W's row)
             q[j] += wcols[k, j] * (past / w)
         q[k] = lo if past > 0.0 else hi
         if sign * qd[k] >= 0.0:
             continue
-        before = qd[k]
-        p = -(1.0 + lflt[k, F_RESTITUTION]) * before / w
+        before = qd[k]  # as changed by the impulses of the joints before k
+        p = -(1.0 + e) * before / w
         for j in range(n):
             qd[j] += wcols[k, j] * p
         removed -= p * 0.5 * (before + qd[k])

@@ -451,7 +451,7 @@ def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row)
             removed = 0.0  # the joint efforts' work over the step, trapezoid in the rates
             for j in range(n):
                 removed -= h * (impulse[j] + stop[j]) * 0.5 * (column[j] + qd[j])
-            impulse[n] += removed + stop_impacts(q, qd, lflt, wcols)
+            impulse[n] += removed + stop_impacts(q, qd, lflt, wcols, column)
     return status
 
 
