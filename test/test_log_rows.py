@@ -138,8 +138,8 @@ class RowByRow:
     def write(self, sample):
         self.inner.write(sample)
 
-    def note_reset(self, t):
-        self.inner.note_reset(t)
+    def note_reset(self, t, tick=None):
+        self.inner.note_reset(t, tick)
 
     def close(self):
         self.inner.close()

@@ -2,7 +2,7 @@
 
 Both recorders share one API: ``write(sample)`` after every tick (or ``write_block(block)`` after
 a :class:`~vjm_ros.sim.samples.SampleBlock` of ticks: the same log, encoded in bulk),
-``note_reset(t)`` when the simulator is reset, ``close()`` (idempotent) or use as a context
+``note_reset(t, tick)`` when the simulator is reset, ``close()`` (idempotent) or use as a context
 manager::
 
     from vjm_ros.logs import McapRecorder, finalize_on_signals
@@ -127,7 +127,7 @@ class Timebase:
             self.last_ns = int(ns[-1])
         return ns
 
-    def reset(self, t: float | None = None) -> int:
+    def reset(self, t: float | None = None, tick: float | None = None) -> int:
         """Start a new episode.
 
         Parameters
@@ -135,12 +135,17 @@ class Timebase:
         t : float, optional
             Simulator time at which the ending episode stopped, s; the last time written when
             omitted or earlier.
+        tick : float, optional
+            The new episode's control period, s, when it changed (a node's ``rate_hz`` takes
+            effect at a reset): the episode starts one new tick after the last.
 
         Returns
         -------
         int
             Recording time at which the new episode starts (its ``t = 0``), ns.
         """
+        if tick is not None:
+            self.tick_ns = max(int(round(tick * 1e9)), 0)
         if self.last_ns is None and t is None:
             return self.offset_ns
         end = self.last_ns if self.last_ns is not None else 0

@@ -341,7 +341,7 @@ class McapRecorder(Recorder):
         self._event(text, ns)
 
     @atomic
-    def note_reset(self, t: float | None = None) -> None:
+    def note_reset(self, t: float | None = None, tick: float | None = None) -> None:
         """Mark a simulator reset.
 
         Parameters
@@ -351,9 +351,11 @@ class McapRecorder(Recorder):
             omitted). Later samples are shifted to start one tick after it, where the reset
             event is logged with the text the node publishes (:func:`~vjm_ros.logs.events.
             reset_line`).
+        tick : float, optional
+            The new episode's control period, s, when the reset changes it.
         """
         self._check_open()
-        ns = self.timebase.reset(t)
+        ns = self.timebase.reset(t, tick)
         ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
         text = events.reset_line(ended * 1e-9, ns * 1e-9)
         self._event(text, ns)

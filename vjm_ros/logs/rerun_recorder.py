@@ -455,11 +455,11 @@ class RerunRecorder(Recorder):
         self.rec.log("events", rr.TextLog(text, level=level))
 
     @atomic
-    def note_reset(self, t: float | None = None) -> None:
+    def note_reset(self, t: float | None = None, tick: float | None = None) -> None:
         """Mark a simulator reset (see :meth:`vjm_ros.logs.McapRecorder.note_reset`)."""
         self._check_open()
         self.send()
-        ns = self.timebase.reset(t)
+        ns = self.timebase.reset(t, tick)
         ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
         text = events.reset_line(ended * 1e-9, ns * 1e-9)
         self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)

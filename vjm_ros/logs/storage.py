@@ -87,7 +87,7 @@ class LogWriters:
     Parameters
     ----------
     recorders : sequence
-        Objects with ``write(sample)``, ``note_reset(t)``, ``close()`` and a ``path`` (or
+        Objects with ``write(sample)``, ``note_reset(t, tick)``, ``close()`` and a ``path`` (or
         ``target``).
     on_failure : callable
         ``on_failure(path, error_text)``, called once per recorder given up.
@@ -132,11 +132,12 @@ class LogWriters:
         except OSError as exc:
             self._give_up(rec, exc)
 
-    def note_reset(self, t: float) -> None:
-        """Tell every working recorder about a simulator reset at ``t`` (s)."""
+    def note_reset(self, t: float, tick: float | None = None) -> None:
+        """Tell every working recorder about a simulator reset at ``t`` (s), after which the
+        control period is ``tick`` (s; unchanged when None)."""
         for rec in list(self.active):
             try:
-                rec.note_reset(t)
+                rec.note_reset(t, tick)
             except OSError as exc:
                 self._give_up(rec, exc)
 

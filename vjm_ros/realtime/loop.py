@@ -550,7 +550,7 @@ class TickLoop:
         if replacement is not None:  # its model may differ in shape
             self.log_rows.close()
             self.log_rows = LogRows(self.sim.model, self.logs.write_block, clock=self._clock)
-        self.logs.note_reset(t_before)
+        self.logs.note_reset(t_before, self.sim.dt)  # the new period, if rate_hz changed
         self.timebase.tick_ns = int(round(self.sim.dt * 1e9))
         start = self.timebase.reset(t_before) * 1e-9
         self.monitor.reset()
