@@ -227,7 +227,7 @@ class Collecting:
     def write(self, sample):
         self.times.append(sample.t)
 
-    def note_reset(self, t):
+    def note_reset(self, t, tick=None):
         pass
 
     def close(self):

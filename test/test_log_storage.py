@@ -59,7 +59,7 @@ class Recorder:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         self.samples += 1
 
-    def note_reset(self, t):
+    def note_reset(self, t, tick=None):
         pass
 
     def close(self):

@@ -3,9 +3,9 @@ pinned to the numba of ``requirements/lock.txt``.
 
 The module keys numba's cache on all of the compiled sources, compiles without reference
 counting, loads cached functions without numba's registry refresh and asks dispatchers about
-their cache, through names numba does not publish. Each falls back to numba's own behaviour
-where a name is missing, so a numba upgrade would not break a run, only silently slow it down or
-(the cache keys) let a kernel run stale code. These tests make the upgrade fail here instead:
+their cache, through names numba does not publish, with no fallback for another numba's
+layout: a numba upgrade that moved one would break a run, or silently slow it down or (the
+cache keys) let a kernel run stale code. These tests make the upgrade fail here instead:
 the installed numba is the locked one, every private name the module lists exists in it, the
 workarounds are in place after numba's import, and no other module of the package touches
 numba's internals.

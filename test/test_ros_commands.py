@@ -690,7 +690,7 @@ class FakeRecorder:
     def write(self, sample):
         self.times.append(sample.t)
 
-    def note_reset(self, t):
+    def note_reset(self, t, tick=None):
         self.resets.append(t)
 
 

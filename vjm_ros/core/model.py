@@ -266,8 +266,6 @@ class Model:
     ancestors : ndarray of float, shape (n, n)
         ``ancestors[i, k] = 1`` when joint ``k`` moves link ``i`` (``k`` is ``i`` or precedes it in
         the same chain).
-    strict_ancestors : ndarray of float, shape (n, n)
-        Same without the diagonal.
     stop_joints : ndarray of int64, shape (s,)
         The joints with a ``range`` (a stop at one end at least), in joint order.
     """
@@ -288,7 +286,6 @@ class Model:
     n: int = 0
     is_revolute: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     ancestors: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
-    strict_ancestors: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     chain_of: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     first_of_chain: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
     base_origin: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
@@ -383,7 +380,6 @@ class Model:
                 first[i] = pos == 0
                 pred_length[i] = chain.length if pos == 0 else links[idx[pos - 1]].length
         model.ancestors = anc
-        model.strict_ancestors = anc - np.eye(n)
         model.chain_of = chain_of
         model.first_of_chain = first
         model.base_origin = base_origin

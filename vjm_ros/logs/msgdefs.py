@@ -29,7 +29,6 @@ LOGGED_TYPES: tuple[str, ...] = (
 )
 """Every type a log's channel may have."""
 
-SEPARATOR = "=" * 80
 TYPES_FILE = Path(__file__).with_name("ros2_types.json")
 """``{type name: {"definition": schema text, "hash": RIHS01 hash}}`` of the logged types and
 every type they depend on."""

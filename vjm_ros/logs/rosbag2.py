@@ -108,7 +108,6 @@ class OfferedQos:
 
 DEFAULT_QOS = OfferedQos()
 EVENTS_QOS = OfferedQos(depth=100)
-LATCHED_QOS = OfferedQos(depth=1, durability=DURABILITY_TRANSIENT_LOCAL)
 
 
 def policy_name(key: str, value: int | str) -> str:
