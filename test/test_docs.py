@@ -542,13 +542,12 @@ def test_scene_blocks_load(block, tmp_path):
 
 @pytest.mark.parametrize("block", params(of_kind("yaml sweep-spec")))
 def test_sweep_spec_blocks_load(block, tmp_path):
-    from vjm_ros.studies.sweep.engine import check_cases
+    from vjm_ros.studies.sweep.plan import plan_sweep
     from vjm_ros.studies.sweep.spec import load_spec
 
     path = tmp_path / "spec.yaml"
     path.write_text(block.text)
-    spec = load_spec(path)
-    check_cases(spec, spec.cases())  # what `vjm sweep` refuses before any run
+    plan_sweep(load_spec(path))  # what `vjm sweep` refuses before any run
 
 
 @pytest.mark.parametrize("block", params(of_kind("text paths")))

@@ -27,7 +27,7 @@ from pathlib import Path
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.logs.signals import StopSignals
 from vjm_ros.studies.bench.grid import FAILED
-from vjm_ros.studies.sweep.plan import SweepPlan, plan_sweep
+from vjm_ros.studies.sweep.plan import plan_sweep
 from vjm_ros.studies.sweep.run import MEASURES, case_duration, case_scene, case_settings
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
 from vjm_ros.studies.sweep.table import (
@@ -39,7 +39,7 @@ from vjm_ros.studies.sweep.table import (
     write_parquet,
 )
 
-__all__ = ["CLUSTER_TIMEOUT", "RESULTS_CSV", "RESULTS_PARQUET", "Engine", "Sweep", "check_cases",
+__all__ = ["CLUSTER_TIMEOUT", "RESULTS_CSV", "RESULTS_PARQUET", "Engine", "Sweep",
            "check_scheduler", "run_sweep", "write_parquet"]
 
 CLUSTER_TIMEOUT = 10.0
@@ -178,12 +178,6 @@ def _warm_up() -> None:
     tiers.compile_first()
     scene = load_scene("pendulum")
     Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains).advance()
-
-
-def check_cases(spec: SweepSpec, cases: Sequence[Case] | None = None) -> SweepPlan:
-    """Refuse, before any run, what would fail: scenes, parameters, every row's settings
-    (:func:`vjm_ros.studies.sweep.plan.plan_sweep`)."""
-    return plan_sweep(spec)
 
 
 class SweepProgress:
