@@ -23,7 +23,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from waiting import wait_for
 
 from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
@@ -48,6 +48,7 @@ class Probe:
         self.node.create_subscription(Clock, "/clock", self._on_clock, DEEP)
         self.node.create_subscription(String, f"{NODE}/events", self._on_event, DEEP)
         self.reset = self.node.create_client(Trigger, f"{NODE}/reset")
+        self.pause = self.node.create_client(SetBool, f"{NODE}/pause")
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.spinner = Spinner(self.executor).start()
@@ -72,8 +73,9 @@ class Probe:
 
 
 def run_with_reset(parameters: list[str], reset_after: float, name: str):
-    """Run the node in realtime with ``parameters`` (``name:=value``), reset it once ``/clock``
-    has passed ``reset_after`` s, and wait for it to stop by itself (it needs a ``duration``).
+    """Run the node in realtime with ``parameters`` (``name:=value``), paused until the probe
+    sees it, reset it once ``/clock`` has passed ``reset_after`` s, and wait for it to stop by
+    itself (it needs a ``duration``).
 
     Returns
     -------
@@ -85,8 +87,10 @@ def run_with_reset(parameters: list[str], reset_after: float, name: str):
     """
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(DOMAIN),
                PYTHONPATH=str(ROOT))
+    # started paused, resumed once the probe sees it: a node that ran its whole duration before
+    # discovery finished (seconds on a loaded machine) left the probe waiting for a service
     cmd = [sys.executable, "-m", "vjm_ros.ros.node", "--ros-args", "-p", "realtime:=true",
-           "-p", "wait_for_command:=false"]
+           "-p", "wait_for_command:=false", "-p", "start_paused:=true"]
     for parameter in parameters:
         cmd += ["-p", parameter]
     probe = Probe(name)
@@ -94,6 +98,12 @@ def run_with_reset(parameters: list[str], reset_after: float, name: str):
                             stderr=subprocess.STDOUT, text=True)
     try:
         assert probe.reset.wait_for_service(timeout_sec=60.0), "no ~/reset service"
+        assert probe.pause.wait_for_service(timeout_sec=60.0), "no ~/pause service"
+        wait_for(lambda: all(probe.node.count_publishers(t) > 0
+                             for t in ("/clock", f"{NODE}/events")), 60.0, "the node's topics")
+        resumed = probe.pause.call_async(SetBool.Request(data=False))
+        wait_for(resumed.done, 30.0, "the resume's answer")
+        assert resumed.result().success, resumed.result().message
         wait_for(lambda: probe.last_clock() >= round(reset_after * 1e9), 60.0,
                  f"/clock to pass {reset_after} s")
         future = probe.reset.call_async(Trigger.Request())
