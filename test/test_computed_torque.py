@@ -40,3 +40,17 @@ def test_five_bar_tracks_its_circle_in_lockstep():
                  domain=int(os.environ["ROS_DOMAIN_ID"]))
     assert r.states == 2501
     assert r.rms_mm < 0.02, r
+
+
+@pytest.mark.ros
+@pytest.mark.slow  # two node + controller pairs of 4 s in lockstep
+def test_friction_compensation_tracks_the_circle_better_than_the_ideal_model():
+    """five_bar_friction: the computed-torque controller on the ideal model lags where the
+    joints' Coulomb friction holds them; with ``compensate_plant`` its model adds the friction
+    and damping. Measured for docs/controllers.md: RMS 6.57 mm ideal, 0.36 mm compensated; the
+    bound asks for a fivefold gain, well inside that eighteenfold."""
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    ideal = run_case("five_bar_friction_circle", "lockstep", domain=domain)
+    compensated = run_case("five_bar_friction_circle_compensated", "lockstep", domain=domain)
+    assert ideal.states == compensated.states == 4001
+    assert compensated.rms_mm < ideal.rms_mm / 5, (ideal, compensated)

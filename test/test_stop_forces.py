@@ -19,6 +19,8 @@ import sys
 import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
+from test_joint_friction import MGP, STOP
+from test_joint_friction import ROD as rod_text
 from test_rerun_recorder import columns
 
 from vjm_ros.scene.loader import parse_scene
@@ -26,17 +28,9 @@ from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import Simulator
 
-MGP = 9.81 * 0.5  # the rod's m g p, N m
-STOP = -np.pi / 2 + 0.4  # the rod, released horizontal, falls onto it at ~0.41 s
-ROD = f"""\
-name: rod
-chains:
-  - name: arm
-    links:
-      - {{name: rod, length: 1.0, mass: 1.0, inertia: 0.0833333333333333, com: [0.5, 0.0],
-         joint: {{name: pivot, type: revolute, angle: 0.0, range: [{STOP!r}, 3.0]}}}}
-defaults: {{integrator: rk4, rate: 1000, duration: 1.5}}
-"""
+ROD = rod_text % ("0.0", f"range: [{STOP!r}, 3.0]") + (
+    "defaults: {integrator: rk4, rate: 1000, duration: 1.5}\n")
+"""The rod of test_joint_friction.py with a stop it falls onto at ~0.41 s (MGP, STOP there)."""
 SLIDE_ANGLE = 2.0  # the slide runs along n(2 rad) = (-0.909, -0.416): gravity pushes it to hi
 BLOCK = f"""\
 name: block
