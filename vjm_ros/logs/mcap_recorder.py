@@ -161,7 +161,7 @@ class McapRecorder(Recorder):
         self.samples = 0
         self._closed = False
         self._joint_names = list(model.joint_names)
-        self._closure_names = list(model.force_names)  # closures, then stops
+        self._force_names = list(model.force_names)  # closures, then stops
         self.measured = bool(settings.get("sensors"))
         """A scene with sensors: ``/joint_states`` holds the measured state (as the node
         publishes it) and ``/<node>/ground_truth/joint_states`` the exact one."""
@@ -191,10 +191,10 @@ class McapRecorder(Recorder):
 
     def _prepare_encoders(self) -> None:
         """Fixed-layout encoders and channel ids of the per-tick topics."""
-        t, k = self.topics, len(self._closure_names)
+        t, k = self.topics, len(self._force_names)
         self._enc_joints = cdr.joint_state_encoder(self._joint_names, messages.FRAME_ID)
         self._enc_forces = cdr.multi_array_encoder(
-            messages.labelled_layout(self._closure_names, len(messages.FORCE_COMPONENTS)), 3 * k
+            messages.labelled_layout(self._force_names, len(messages.FORCE_COMPONENTS)), 3 * k
         )
         self._enc_energy = cdr.multi_array_encoder(
             messages.labelled_layout(messages.ENERGY_LABELS, 1), len(messages.ENERGY_LABELS)
@@ -205,7 +205,7 @@ class McapRecorder(Recorder):
         self._ch_forces = self._channels[t.constraint_forces]
         self._ch_energy = self._channels[t.energy]
         self._ch_clock = self._channels[t.clock]
-        self._ch_wrench = [self._channels[t.wrench(name)] for name in self._closure_names]
+        self._ch_wrench = [self._channels[t.wrench(name)] for name in self._force_names]
         self._block_encoder = mcap_block.BlockEncoder(
             self.model, self._channels, t, self.marker_every, self.force_scale, self.measured)
 
@@ -227,7 +227,7 @@ class McapRecorder(Recorder):
             (t.clock, messages.CLOCK),
             (t.events, messages.STRING),
         ]
-        plan += [(t.wrench(name), messages.WRENCH_STAMPED) for name in self._closure_names]
+        plan += [(t.wrench(name), messages.WRENCH_STAMPED) for name in self._force_names]
         if self.marker_every > 0:
             plan.append((t.markers, messages.MARKER_ARRAY))
         schema_ids: dict[str, int] = {}

@@ -294,16 +294,16 @@ class SimNode(Node):
     def _adopt(self, model) -> None:
         """Names, layouts and one wrench publisher per closure and per stop for ``model``."""
         self._joint_names = list(model.joint_names)
-        self._closure_names = list(model.force_names)
+        self._force_names = list(model.force_names)
         for name in list(self._wrench_pubs):
-            if name not in self._closure_names:
+            if name not in self._force_names:
                 self.destroy_publisher(self._wrench_pubs.pop(name))
-        for name in self._closure_names:
+        for name in self._force_names:
             if name not in self._wrench_pubs:
                 self._wrench_pubs[name] = self.create_publisher(
                     WrenchStamped, conv.wrench_topic(name), 10)
-        self._send_wrenches = [raw_publish(self._wrench_pubs[n]) for n in self._closure_names]
-        self._wire = TickWire(self._joint_names, self._closure_names)
+        self._send_wrenches = [raw_publish(self._wrench_pubs[n]) for n in self._force_names]
+        self._wire = TickWire(self._joint_names, self._force_names)
         self._marker_wire = MarkerWire()
         self._trace = conv.TipTrace(len(model.chains))
 

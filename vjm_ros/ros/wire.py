@@ -46,16 +46,16 @@ class TickWire:
     ----------
     joint_names : sequence of str
         ``Model.joint_names``.
-    closure_names : sequence of str
+    force_names : sequence of str
         ``Model.force_names``: the closures, then the stops.
     """
 
-    def __init__(self, joint_names: Sequence[str], closure_names: Sequence[str]):
-        k = len(closure_names)
+    def __init__(self, joint_names: Sequence[str], force_names: Sequence[str]):
+        k = len(force_names)
         self.joint = _Buffer(cdr.joint_state_layout(joint_names, layouts.FRAME_ID))
         self._q, self._qd, self._effort = self.joint.runs
         self.forces = _Buffer(cdr.multi_array_layout(
-            layouts.labelled_layout(closure_names, len(layouts.FORCE_COMPONENTS)),
+            layouts.labelled_layout(force_names, len(layouts.FORCE_COMPONENTS)),
             len(layouts.FORCE_COMPONENTS) * k, align_empty=True))  # rclpy's bytes
         self._forces = (self.forces.runs[0] if k else np.zeros(0)).reshape(
             k, len(layouts.FORCE_COMPONENTS))
@@ -63,7 +63,7 @@ class TickWire:
             layouts.labelled_layout(layouts.ENERGY_LABELS, 1), len(layouts.ENERGY_LABELS)))
         (self._energy,) = self.energy.runs
         wrench = cdr.wrench_stamped_layout(layouts.FRAME_ID)
-        self.wrenches = [_Buffer(wrench) for _ in closure_names]
+        self.wrenches = [_Buffer(wrench) for _ in force_names]
         self._linear = [w.runs[0] for w in self.wrenches]
         self._torque = [w.runs[1] for w in self.wrenches]
         self.clock = _Buffer(cdr.CLOCK_LAYOUT)
