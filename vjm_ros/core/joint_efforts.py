@@ -70,7 +70,7 @@ def _sticks(lflt, k):
 
 
 @_jit(allocates=False)
-def _has_stop(lflt, k):
+def has_stop(lflt, k):
     """Whether joint ``k`` has a finite stop."""
     return lflt[k, F_RANGE_LO] > -1e300 or lflt[k, F_RANGE_HI] < 1e300
 
@@ -82,7 +82,7 @@ def _needed(lflt, k, q, qd, acc, h, implicit):
     and its rate predicted at the end of the step), where the step may end with an impact."""
     if _sticks(lflt, k):
         return True
-    if not _has_stop(lflt, k):
+    if not has_stop(lflt, k):
         return False
     u = acc[k] if implicit else qd[k] + h * acc[k]
     reach = 2.0 * h * max(abs(qd[k]), abs(u))
@@ -177,7 +177,7 @@ def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, l
             for row in range(2):  # the stop, then the friction
                 u = acc[k] if implicit else qd[k] + h * acc[k]
                 if row == 0:
-                    if not _has_stop(lflt, k):
+                    if not has_stop(lflt, k):
                         continue
                     old = stop[k]  # on a stop (touching it), the joint may only leave it
                     new = 0.0
@@ -221,7 +221,7 @@ def stop_impacts(q, qd, lflt, wcols, start):
     n = q.shape[0]
     removed = 0.0
     for k in range(n):
-        if not _has_stop(lflt, k):
+        if not has_stop(lflt, k):
             continue
         lo = lflt[k, F_RANGE_LO]
         hi = lflt[k, F_RANGE_HI]

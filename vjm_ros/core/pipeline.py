@@ -44,6 +44,7 @@ import numpy as np
 
 from vjm_ros.core import kernels as K
 from vjm_ros.core import layout
+from vjm_ros.core.joint_efforts import has_stop
 from vjm_ros.core.terms import point_motion
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
@@ -196,7 +197,7 @@ def observe_stops(row, model, data, first, o_force, o_cpoints):
     kin, stop = data[0], data[26]
     c = first
     for j in range(lint.shape[0]):
-        if lflt[j, layout.F_RANGE_LO] > -math.inf or lflt[j, layout.F_RANGE_HI] < math.inf:
+        if has_stop(lflt, j):
             s = stop[j]
             if lint[j, layout.L_REV] == 1:
                 o_force[row, c, 0] = 0.0
