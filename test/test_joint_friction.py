@@ -232,23 +232,27 @@ def test_bad_stops_are_refused_naming_the_key(keys, key, expected):
     assert expected in str(info.value)
 
 
-def test_a_stop_inside_a_closed_chain_holds_and_the_closures_recover():
-    """five_bar with a stop on ``left_base`` at -1.8 rad (it swings to -3.3 rad without it),
-    exact closures: the joint never goes past the stop by more than a step's travel, it rests
-    on it, and the closures stay met to what the impacts disturb."""
+@pytest.mark.parametrize("closure", ["exact", "penalty"])
+def test_a_stop_inside_a_closed_chain_holds_and_the_closures_recover(closure):
+    """five_bar with a stop on ``left_base`` at -1.8 rad (it swings to -3.3 rad without it):
+    the joint never goes past the stop by more than a step's travel, it rests on it, and the
+    closures stay met to what the impacts disturb (penalty closures: to their own give)."""
     lo = np.degrees(-1.8)
     text = builtin_scene_text("five_bar").replace(
         "{name: left_base, type: revolute, angle: 45.0}",
         f"{{name: left_base, type: revolute, angle: 45.0, range: [{lo}, 60.0]}}")
-    samples = _samples(parse_scene(text), 3.0, closure="exact")
+    samples = _samples(parse_scene(text), 3.0, closure=closure)
     q = np.array([s.q[0] for s in samples])
     assert q.min() > -1.8 - 1e-9  # set back on the stop at the end of every step
     assert np.count_nonzero(np.abs(q + 1.8) < 1e-6) > 100  # it rests on the stop a while
     # an impact sets the chain back by a step's travel (h |qd| = 8.5e-3 rad at the first
     # impact's 8.5 rad/s) along W's row, which keeps the closures to first order: the pin
     # opens by the second-order rest, (8.5e-3)^2 = 7e-5 times second derivatives of the pin's
-    # position of a few m (measured 2.3e-4 m; without W's row it was 7e-3 m)
-    assert max(s.closure_error.max() for s in samples) < 1e-3
+    # position of a few m (measured 2.3e-4 m; without W's row it was 7e-3 m). Penalty
+    # closures give 2.3e-3 m on this motion without the stop; the impacts, whose W is M^-1
+    # there (the closures act as forces), open them by ~1e-3 m more (measured 3.2e-3 m)
+    bound = {"exact": 1e-3, "penalty": 5e-3}[closure]
+    assert max(s.closure_error.max() for s in samples) < bound
 
 
 def test_controller_model_compensates_coulomb_friction_on_request():
