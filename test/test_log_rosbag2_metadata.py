@@ -24,7 +24,7 @@ HASH_STR = "RIHS01_" + "b" * 64
 
 # What rosbag2 (metadata version 9: Jazzy 0.26 to Kilted 0.32) writes for a bag of one MCAP file
 # with /joint_states (3 messages, keep-last 10) and /vjm_sim_node/events (1 message, keep-last
-# 100), the first message at 1000 ns and the last at 5000 ns, recorded under ROS_DISTRO=kilted.
+# 100, transient local), the first message at 1000 ns and the last at 5000 ns, recorded under ROS_DISTRO=kilted.
 EXPECTED = f"""\
 rosbag2_bagfile_information:
   version: 9
@@ -65,7 +65,7 @@ rosbag2_bagfile_information:
           - history: keep_last
             depth: 100
             reliability: reliable
-            durability: volatile
+            durability: transient_local
             deadline:
               sec: 0
               nsec: 0
@@ -167,12 +167,13 @@ def test_rosbags_opens_the_bag_directory_and_reads_the_qos(tmp_path):
     assert [(c.topic, c.msgtype, c.msgcount, c.digest) for c in connections] == [
         ("/joint_states", "sensor_msgs/msg/JointState", 3, HASH_JS),
         ("/vjm_sim_node/events", "std_msgs/msg/String", 1, HASH_STR)]
-    depths = []
+    depths, durabilities = [], []
     for conn in connections:
         (qos,) = conn.ext.offered_qos_profiles
         assert qos.history == QosHistory.KEEP_LAST
         assert qos.reliability == QosReliability.RELIABLE
-        assert qos.durability == QosDurability.VOLATILE
         assert qos.liveliness == QosLiveliness.AUTOMATIC
         depths.append(qos.depth)
+        durabilities.append(qos.durability)
     assert depths == [10, 100]
+    assert durabilities == [QosDurability.VOLATILE, QosDurability.TRANSIENT_LOCAL]

@@ -30,7 +30,7 @@ liveliness, liveliness_lease_duration, avoid_ros_namespace_conventions. What oth
 * rosbags (a third-party bag library) reads versions up to 9, both enum forms.
 
 The profiles recorded are the ones the node offers: reliable, volatile, keep-last 10 (the event
-topic keeps 100, the scene description is transient-local, depth 1).
+topic is transient-local with depth 100, the scene description transient-local with depth 1).
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ class OfferedQos:
 
 
 DEFAULT_QOS = OfferedQos()
-EVENTS_QOS = OfferedQos(depth=100)
+EVENTS_QOS = OfferedQos(depth=100, durability=DURABILITY_TRANSIENT_LOCAL)
 
 
 def policy_name(key: str, value: int | str) -> str:

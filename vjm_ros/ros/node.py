@@ -22,7 +22,8 @@ topic                           type                                      when
                                                                           :mod:`~.clock_owner`)
 ``~/markers``                   ``visualization_msgs/MarkerArray``        ``marker_rate_hz`` (wall)
 ``/diagnostics``                ``diagnostic_msgs/DiagnosticArray``       1 Hz (wall)
-``~/events``                    ``std_msgs/String``                       pause, step, reset, timeouts
+``~/events``                    ``std_msgs/String`` (transient local,     pause, step, reset, timeouts
+                                depth 100)
 ``~/scene_description``         ``std_msgs/String`` (transient local)     at start and new scenes
 ``robot_description`` (relative) ``std_msgs/String`` (transient local)    same: the scene's URDF
 ``~/effort_commands`` (in)      ``std_msgs/Float64MultiArray``            one value per actuator
@@ -261,7 +262,10 @@ class SimNode(Node):
         self._energy_pub = self.create_publisher(Float64MultiArray, "~/energy", 10)
         self._markers_pub = self.create_publisher(MarkerArray, "~/markers", 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._events_pub = self.create_publisher(String, "~/events", 100)
+        # the last 100 events reach a subscriber that matches late (a transient-local one)
+        self._events_pub = self.create_publisher(
+            String, "~/events", QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                           durability=DurabilityPolicy.TRANSIENT_LOCAL))
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._scene_pub = self.create_publisher(String, "~/scene_description", latched)
