@@ -105,6 +105,11 @@ class RunOutputs:
         consumers += [self._log_consumer(key, opener) for key, opener in openers]
         self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers, depth=8)
 
+    def wait_opened(self) -> None:
+        """Wait until every log has opened or failed to open (a failure is raised by
+        :meth:`put` or :meth:`close`)."""
+        self._fan.wait_started()
+
     def take(self) -> SampleBlock:
         """A block to fill (see :meth:`BlockFanOut.take`)."""
         return self._fan.take()
