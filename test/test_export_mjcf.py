@@ -204,7 +204,7 @@ def test_bench_model_is_the_export():
     """One MJCF writer: the bench's MuJoCo model is the export at the bench's settings."""
     model = load_scene("four_bar").model
     s = compare_mujoco.MujocoSettings(integrator="Euler", rate=500.0, substeps=2)
-    assert compare_mujoco.model_to_mjcf(model, s) == scene_mjcf(model, MjcfSettings(
+    assert scene_mjcf(model, s) == scene_mjcf(model, MjcfSettings(
         timestep=0.001, integrator="Euler", carriage_mass=s.inertia_epsilon))
     assert math.isclose(s.timestep, 0.001)
 

@@ -21,21 +21,14 @@ are not affected, but a requirement cannot tell models apart.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import ModuleType
 
 import numpy as np
 
 from vjm_ros.core.errors import DivergenceError
 from vjm_ros.core.model import Model
-from vjm_ros.formats.mjcf_out import (  # noqa: F401 (the defaults are part of this module's API)
-    DEFAULT_SOLIMP,
-    DEFAULT_SOLREF,
-    INITIAL_KEY,
-    MjcfSettings,
-    scene_mjcf,
-    stiffen_carriages,
-)
+from vjm_ros.formats.mjcf_out import INITIAL_KEY, MjcfSettings, scene_mjcf, stiffen_carriages
 from vjm_ros.scene.plant import Plant
 
 MUJOCO_REQUIREMENT = "mujoco>=3.2,!=4.0.0"
@@ -73,59 +66,29 @@ def version_note(version: str | None) -> str | None:
 
 
 @dataclass(frozen=True)
-class MujocoSettings:
-    """How MuJoCo integrates the mechanism.
+class MujocoSettings(MjcfSettings):
+    """The MJCF's solver settings (:class:`MjcfSettings`) at the bench's control rate.
+
+    The step follows from the rate, ``timestep = 1 / (rate * substeps)``, and the carriages weigh
+    ``inertia_epsilon`` (negligible: :func:`stiffen_carriages` gives them their link's constraint
+    weight); neither is given.
 
     Attributes
     ----------
-    integrator : str
-        ``"Euler"``, ``"implicitfast"`` or ``"RK4"`` (also ``"implicit"``).
     rate : float
         Control ticks per second, Hz.
     substeps : int
-        MuJoCo steps per tick (``timestep = 1 / (rate * substeps)``).
-    solref : tuple of float
-        Equality ``solref``: ``(timeconst, dampratio)`` or, both negative,
-        ``(-stiffness, -damping)``.
-    solimp : tuple of float
-        Equality ``solimp`` (5 numbers).
-    inertia_epsilon : float
-        Added to every principal inertia, kg m^2.
+        MuJoCo steps per tick.
     """
 
-    integrator: str = "RK4"
+    timestep: float = field(init=False)
+    carriage_mass: float | None = field(init=False)
     rate: float = 1000.0
     substeps: int = 1
-    solref: tuple[float, ...] = DEFAULT_SOLREF
-    solimp: tuple[float, ...] = DEFAULT_SOLIMP
-    inertia_epsilon: float = 1e-12
 
-    @property
-    def timestep(self) -> float:
-        """MuJoCo step, s."""
-        return 1.0 / (self.rate * self.substeps)
-
-
-def model_to_mjcf(model: Model, settings: MujocoSettings | None = None,
-                  plant: Plant | None = None) -> str:
-    """MJCF text of a scene model at the bench's settings (:func:`scene_mjcf`).
-
-    Parameters
-    ----------
-    model : Model
-    settings : MujocoSettings, optional
-    plant : Plant, optional
-        The scene's actuator dynamics (gears, lags, delays).
-
-    Returns
-    -------
-    str
-    """
-    s = settings or MujocoSettings()
-    return scene_mjcf(model, MjcfSettings(timestep=s.timestep, integrator=s.integrator,
-                                          solref=tuple(s.solref), solimp=tuple(s.solimp),
-                                          inertia_epsilon=s.inertia_epsilon,
-                                          carriage_mass=s.inertia_epsilon), plant)
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "timestep", 1.0 / (self.rate * self.substeps))
+        object.__setattr__(self, "carriage_mass", self.inertia_epsilon)
 
 
 class MujocoSimulator:
@@ -152,7 +115,7 @@ class MujocoSimulator:
         self.mj = mj
         self.model = model
         self.settings = settings or MujocoSettings()
-        self.xml = model_to_mjcf(model, self.settings, plant)
+        self.xml = scene_mjcf(model, self.settings, plant)
         self.m = mj.MjModel.from_xml_string(self.xml)
         stiffen_carriages(self.m, model)
         self.d = mj.MjData(self.m)
