@@ -201,24 +201,10 @@ def run_bench(opts: BenchOptions) -> dict:
         progress.close()
         if engine is not None:
             engine.__exit__(None, None, None)
-    results["recommended"] = recommend_overall(all_rows) if all_rows else {}
     results["meta"]["cpu_share"] = _cpu_share(all_rows)
     results["meta"]["bench_wall_time"] = time.perf_counter() - started
-    long_runs = _long_runs(opts.out)
-    if long_runs:
-        results["long_runs"] = long_runs
     write_outputs(results, all_rows, opts)
     return results
-
-
-def _long_runs(out: Path) -> list[dict]:
-    found = []
-    for path in sorted(out.glob("long_run*.json")) if out.is_dir() else []:
-        try:
-            found.append({**json.loads(path.read_text()), "source": path.name})
-        except (OSError, ValueError):
-            continue
-    return found
 
 
 def rows_from_results(results: dict) -> dict[str, list[RowResult]]:
@@ -256,10 +242,6 @@ def rerender(results_path: Path, opts: BenchOptions) -> dict:
     rows = rows_from_results(results)
     for name, rs in rows.items():
         results["scenes"][name].update(_analysis(rs))
-    results["recommended"] = recommend_overall(rows) if rows else {}
-    long_runs = _long_runs(opts.out)
-    if long_runs:
-        results["long_runs"] = long_runs
     write_outputs(results, rows, opts)
     return results
 
@@ -323,8 +305,18 @@ def _meta(opts: BenchOptions, threads: dict, mj_version, mj_note, grid: Grid) ->
 
 
 def write_outputs(results: dict, rows: dict[str, list[RowResult]], opts: BenchOptions) -> None:
-    """Write ``results.json``, ``report.md``, the figures and (with ``--docs``) the docs page."""
+    """Add the overall recommendation and the long runs found in ``opts.out`` to ``results``, then
+    write ``results.json``, ``report.md``, the figures and (with ``--docs``) the docs page."""
     out = opts.out
+    results["recommended"] = recommend_overall(rows) if rows else {}
+    long_runs = []
+    for path in sorted(out.glob("long_run*.json")) if out.is_dir() else []:
+        try:
+            long_runs.append({**json.loads(path.read_text()), "source": path.name})
+        except (OSError, ValueError):
+            continue
+    if long_runs:
+        results["long_runs"] = long_runs
     out.mkdir(parents=True, exist_ok=True)
     figures = {}
     for name, rs in rows.items():
