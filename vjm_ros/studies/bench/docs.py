@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 
 from vjm_ros.studies.bench.analysis import (
@@ -32,6 +33,7 @@ from vjm_ros.studies.bench.report import (
     _scaling_text,
     _share_text,
     _tier_table,
+    table,
 )
 from vjm_ros.studies.bench.runs import (
     RowResult,
@@ -192,19 +194,17 @@ def live_table(rows: dict[str, list[RowResult]]) -> list[str]:
         for r in rs:
             if r.engine == "vjm" and r.step is not None and r.rate == LIVE_RATE and r.substeps == 1:
                 by.setdefault((r.integrator, r.closure), []).append(r)
-    lines = ["| integrator | closure | status on the scenes | worst ms per sim s | worst CPU ms "
-             "per sim s | worst max closure err m | worst position err m | worst energy drift |",
-             "|---|---|---|---|---|---|---|---|"]
+    rows = []
     for (integ, closure), rs in by.items():
-        states = {}
-        for r in rs:
-            states[r.status] = states.get(r.status, 0) + 1
-        status = ", ".join(f"{v} {k}" for k, v in states.items())
+        states = Counter(r.status for r in rs)
         ran = [r for r in rs if r.ok]
-        lines.append(f"| {integ} | {closure} | {status} | {_ms(_worst(ran, 'wall_per_sim_s'))} "
-                     f"| {_ms(_worst(ran, 'cpu_per_sim_s'))} | {_e(_worst(ran, 'max_closure_error'))} "
-                     f"| {_e(_worst(ran, 'position_deviation'))} | {_e(_worst(ran, 'energy_drift'))} |")
-    return lines
+        rows.append([integ, closure, ", ".join(f"{v} {k}" for k, v in states.items()),
+                     _ms(_worst(ran, "wall_per_sim_s")), _ms(_worst(ran, "cpu_per_sim_s")),
+                     *(_e(_worst(ran, a)) for a in ("max_closure_error", "position_deviation",
+                                                    "energy_drift"))])
+    return table(["integrator", "closure", "status on the scenes", "worst ms per sim s",
+                  "worst CPU ms per sim s", "worst max closure err m", "worst position err m",
+                  "worst energy drift"], rows)
 
 
 def _thesis_findings(vjm_rows: list[RowResult]) -> list[str]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from vjm_ros.studies.bench.analysis import (
@@ -160,41 +160,38 @@ def _status(r: RowResult) -> str:
     return r.status
 
 
+def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> list[str]:
+    """The lines of a Markdown table: the header, its rule and one line per row of cells."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+            *("| " + " | ".join(row) + " |" for row in rows)]
+
+
 def _row_table(rows: Sequence[RowResult]) -> list[str]:
-    lines = [
-        "| engine | integrator | rate Hz | substeps | h ms | closure | status | ms per sim s | RTF "
-        "| max closure err m | energy drift | ledger residual J | tip err m | position err m |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        h = "adaptive" if r.step is None else f"{1e3 * r.step:.3g}"
-        integ = r.integrator if r.step is not None else f"{r.integrator} rtol {r.settings.get('rtol'):.0e}"
-        lines.append(
-            f"| {r.engine} | {integ} | {r.rate:g} | {r.substeps} | {h} | {r.closure} | {_status(r)} "
-            f"| {_ms(r.wall_per_sim_s)} | {_e(r.realtime_factor)} | {_e(r.max_closure_error)} "
-            f"| {_e(r.energy_drift)} | {_e(r.energy_balance_residual)} | {_e(r.tip_deviation)} "
-            f"| {_e(r.position_deviation)} |"
-        )
-    return lines
+    return table(
+        ["engine", "integrator", "rate Hz", "substeps", "h ms", "closure", "status",
+         "ms per sim s", "RTF", "max closure err m", "energy drift", "ledger residual J",
+         "tip err m", "position err m"],
+        ([r.engine, r.integrator if r.step is not None
+          else f"{r.integrator} rtol {r.settings.get('rtol'):.0e}", f"{r.rate:g}", str(r.substeps),
+          "adaptive" if r.step is None else f"{1e3 * r.step:.3g}", r.closure, _status(r),
+          _ms(r.wall_per_sim_s), _e(r.realtime_factor), _e(r.max_closure_error),
+          _e(r.energy_drift), _e(r.energy_balance_residual), _e(r.tip_deviation),
+          _e(r.position_deviation)] for r in rows),
+    )
 
 
 def _front_table(front: Sequence[RowResult]) -> list[str]:
-    lines = ["| setting | ms per sim s | RTF | position err m | max closure err m | energy drift |",
-             "|---|---|---|---|---|---|"]
-    for r in front:
-        lines.append(f"| {r.label} | {_ms(r.wall_per_sim_s)} | {_e(r.realtime_factor)} "
-                     f"| {_e(r.position_deviation)} | {_e(r.max_closure_error)} | {_e(r.energy_drift)} |")
-    return lines
+    return table(
+        ["setting", "ms per sim s", "RTF", "position err m", "max closure err m", "energy drift"],
+        ([r.label, _ms(r.wall_per_sim_s), _e(r.realtime_factor), _e(r.position_deviation),
+          _e(r.max_closure_error), _e(r.energy_drift)] for r in front),
+    )
 
 
 def _tier_rows(rec: dict, header: list[str], missing: str, cells) -> list[str]:
     """A Markdown table with one row per accuracy tier: ``cells(b)`` or ``missing``."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for tier, _ in TIERS:
-        b = rec.get(tier)
-        row = [missing] + [""] * (len(header) - 2) if b is None else cells(b)
-        lines.append("| " + " | ".join([tier, *row]) + " |")
-    return lines
+    return table(header, ([tier, *([missing] + [""] * (len(header) - 2) if rec.get(tier) is None
+                                   else cells(rec[tier]))] for tier, _ in TIERS))
 
 
 def _tier_table(rec: dict) -> list[str]:
@@ -220,16 +217,13 @@ def _overall_table(rec: dict, n_scenes: int) -> list[str]:
 
 
 def _match_table(match: list[dict]) -> list[str]:
-    lines = ["| position err within | vjm: cheapest setting | ms per sim s | MuJoCo: cheapest setting "
-             "| ms per sim s | vjm / MuJoCo cost |", "|---|---|---|---|---|---|"]
-    for m in match:
-        v, j = m["vjm"], m["mujoco"]
-        lines.append(
-            f"| {m['level']:.0e} m | {v['label'] if v else 'none'} | {_ms(v['wall_per_sim_s']) if v else '–'} "
-            f"| {j['label'] if j else 'none'} | {_ms(j['wall_per_sim_s']) if j else '–'} "
-            f"| {_e(m['ratio'])} |"
-        )
-    return lines
+    def best(b: dict | None) -> list[str]:
+        return [b["label"], _ms(b["wall_per_sim_s"])] if b else ["none", "–"]
+
+    return table(["position err within", "vjm: cheapest setting", "ms per sim s",
+                  "MuJoCo: cheapest setting", "ms per sim s", "vjm / MuJoCo cost"],
+                 ([f"{m['level']:.0e} m", *best(m["vjm"]), *best(m["mujoco"]), _e(m["ratio"])]
+                  for m in match))
 
 
 def _ref_line(info: dict) -> str:
@@ -344,17 +338,16 @@ def _scaling_text(scaling: dict) -> list[str]:
              "chain of N links whose tip runs on a line; `chains`: N two-link chains whose tips "
              "meet at one pin (2(N−1) closure rows).", "", "![scaling](scaling.png)", ""]
     for family in ("links", "chains"):
-        table = scaling[family]["table"]
+        rows = scaling[family]["table"]
         keys = _scaling_keys(scaling)
-        lines += [f"| {family} | n | closure rows | " + " | ".join(keys) + " |",
-                  "|---|---|---|" + "---|" * len(keys)]
-        for r in table:
-            vals = " | ".join("–" if r.get(k) is None else f"{1e6 * r[k]:.3g}" for k in keys)
-            lines.append(f"| {r['size']} | {r['n']} | {r['rows']} | {vals} |")
+        lines += table([family, "n", "closure rows", *keys],
+                       ([str(r["size"]), str(r["n"]), str(r["rows"]),
+                         *("–" if r.get(k) is None else f"{1e6 * r[k]:.3g}" for k in keys)]
+                        for r in rows))
         g = scaling[family]["growth_exponent"]
         lines += ["", "Growth exponent (cost ∝ n^p, sizes ≥ 4): "
                   + ", ".join(f"{k}: {'–' if v is None else f'{v:.2f}'}" for k, v in g.items()), ""]
-        lines += _bare_step_lines(table, keys)
+        lines += _bare_step_lines(rows, keys)
     return lines
 
 
