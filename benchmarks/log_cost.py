@@ -240,8 +240,9 @@ def render_fresh(r: dict) -> list[str]:
         f"A fresh `vjm run {r['scene']} --integrator rk4 --closure exact --duration "
         f"{r['seconds']:g}` process per run, as a user runs it, best of {r['rounds']} "
         "interleaved: the `wall_time` it reports (first tick to last log finalized; the "
-        "imports of the log libraries are start-up, made while the scene loads) and the "
-        "process's elapsed time (start-up included).",
+        "imports of the log libraries, made while the scene loads, and the opening of the "
+        "logs, made while the compiled pipeline loads, are start-up) and the process's "
+        "elapsed time (start-up included).",
         "",
         "| outputs | wall_time ms | / no output | elapsed ms | / no output |",
         "|---|---|---|---|---|",
@@ -304,8 +305,9 @@ def render_section(r: dict) -> str:
         "(`send_columns`) every 5000 ticks.",
         "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
         "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
-        "blocks in a thread of their own (opening their files there too), so on two cores the "
-        "logs are written while the next blocks are computed. The wall time then depends on "
+        "blocks in a thread of their own (opening their files there while the compiled "
+        "pipeline loads), so on two cores the logs are written while the next blocks are "
+        "computed. The wall time then depends on "
         "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
         f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}). "
         "On two free cores a run takes at least half its CPU time: with all three logs "
