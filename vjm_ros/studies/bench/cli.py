@@ -14,6 +14,7 @@ from vjm_ros.core.errors import (
     SceneError,
 )
 from vjm_ros.scene.loader import builtin_scenes, load_scene
+from vjm_ros.sim.settings import resolve_settings
 from vjm_ros.sim.simulator import SimulationSettings
 from vjm_ros.studies.bench.grid import (
     FULL_SCENES,
@@ -188,13 +189,9 @@ def _main_plant(args) -> int:
 def _main_long_run(args) -> int:
     limit_threads()
     scene = load_scene("four_bar")
-    d, g = scene.defaults, scene.gains
-    closure = args.long_run_closure or g.get("method", "penalty")
-    settings = SimulationSettings(
-        integrator=args.long_run_integrator or d.get("integrator", "rk4"),
-        rate=d.get("rate", 1000.0), substeps=d.get("substeps", 1), closure=closure,
-        projection=bool(args.long_run_projection),
-    )
+    settings = resolve_settings(scene.defaults, scene.gains, integrator=args.long_run_integrator,
+                                closure=args.long_run_closure,
+                                projection=bool(args.long_run_projection))
     bar = BenchProgress(args.long_run, enabled=not args.no_progress)
     last = [0.0]
 

@@ -12,6 +12,7 @@ from vjm_ros.core.errors import (
     DivergenceError,
 )
 from vjm_ros.scene.loader import load_scene
+from vjm_ros.sim.settings import resolve_settings
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 from vjm_ros.studies.bench.grid import (
     jsonable,
@@ -49,10 +50,7 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
     """
     scene = load_scene(scene_name)
     if settings is None:
-        d, g = scene.defaults, scene.gains
-        settings = SimulationSettings(integrator=d.get("integrator", "rk4"),
-                                      rate=d.get("rate", 1000.0), substeps=d.get("substeps", 1),
-                                      closure=g.get("method", "penalty"))
+        settings = resolve_settings(scene.defaults, scene.gains)
     sim = Simulator(scene.model, settings, scene.gains, scene.plant)
     if scene.model.actuators:
         sim.set_efforts(_efforts(scene))
