@@ -242,6 +242,11 @@ def numbers(text: str | None, count: int, path: str, where: str, default=None) -
     return values
 
 
-def inertia_tensor(ixx, ixy, ixz, iyy, iyz, izz) -> np.ndarray:
-    """The symmetric tensor of the six moments and products of inertia, kg m^2, (3, 3)."""
+def inertia_tensor(el: ET.Element | None, path: str, where: str, moment: float) -> np.ndarray:
+    """The symmetric tensor an SDFormat ``<inertia>`` element writes (``<ixx>`` to ``<izz>``),
+    kg m^2, (3, 3): a moment it does not write (or no element) is ``moment``, a product 0."""
+    ixx, ixy, ixz, iyy, iyz, izz = (
+        float(numbers(el.findtext(k) if el is not None else None, 1, path, f"{where} <{k}>",
+                      default=[moment if k in ("ixx", "iyy", "izz") else 0.0])[0])
+        for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], dtype=float)

@@ -201,13 +201,7 @@ class _ModelReader:
             mass = float(numbers(inertial.findtext("mass"), 1, self.path, f"{where} <mass>",
                                  default=[1.0])[0])
             local = self.pose(inertial.find("pose"), f"{where} <pose>")
-            it = inertial.find("inertia")
-            keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-            defaults = {"ixx": 1.0, "iyy": 1.0, "izz": 1.0}
-            vals = [float(numbers(it.findtext(k) if it is not None else None, 1, self.path,
-                                  f"{where} <{k}>", default=[defaults.get(k, 0.0)])[0])
-                    for k in keys]
-            tensor = inertia_tensor(*vals)
+            tensor = inertia_tensor(inertial.find("inertia"), self.path, where, moment=1.0)
         if mass < 0:
             raise self.fail(f"{where} <mass>", "a mass >= 0", mass)
         rot = frame.rotation @ local.rotation

@@ -201,10 +201,8 @@ class _UrdfReader:
                 tensor = np.zeros((3, 3))
                 it = inertial.find("inertia") if inertial is not None else None
                 if it is not None:
-                    vals = [float(numbers(it.findtext(k), 1, self.path, f"{where} <{k}>",
-                                          default=[0.0])[0])
-                            for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")]
-                    tensor = frame.rotation @ inertia_tensor(*vals) @ frame.rotation.T
+                    tensor = inertia_tensor(it, self.path, where, moment=0.0)
+                    tensor = frame.rotation @ tensor @ frame.rotation.T
                 out[name] = Body(name=name, mass=mass, com=frame.position.copy(),
                                  inertia=tensor, origin=frame.position.copy(), element=where)
         return out
