@@ -78,6 +78,14 @@ def _origin(el: ET.Element | None, path: str, where: str) -> Pose:
     return Pose(rpy_matrix(*rpy), np.array(xyz))
 
 
+def _pose(el: ET.Element | None, path: str, where: str) -> Pose:
+    """The transform of an SDFormat ``<pose>`` (``x y z roll pitch yaw``; identity when absent)."""
+    if el is None:
+        return Pose.identity()
+    v = numbers(el.text, 6, path, where)
+    return Pose(rpy_matrix(*v[3:]), np.array(v[:3]))
+
+
 class _UrdfReader:
     def __init__(self, path: str, root: ET.Element, robot):
         self.path, self.root, self.robot = path, root, robot
@@ -189,11 +197,7 @@ class _UrdfReader:
                 where = f"<gazebo> link '{name}'"
                 if name in self.frame:
                     raise self.fail(where, "a link name the robot does not use", name)
-                pose_el = el.find("pose")
-                frame = Pose.identity()
-                if pose_el is not None:
-                    v = numbers(pose_el.text, 6, self.path, f"{where} <pose>")
-                    frame = Pose(rpy_matrix(*v[3:]), np.array(v[:3]))
+                frame = _pose(el.find("pose"), self.path, f"{where} <pose>")
                 self.frame[name] = frame
                 inertial = el.find("inertial")
                 mass = float(numbers(inertial.findtext("mass") if inertial is not None else None,
@@ -224,11 +228,7 @@ class _UrdfReader:
                 rel = (pose_el.get("relative_to", "") if pose_el is not None else "") or child
                 base = self.link_frame(rel, f"{where} <pose> relative_to")
                 self.link_frame(parent, f"{where} <parent>")
-                local = Pose.identity()
-                if pose_el is not None:
-                    v = numbers(pose_el.text, 6, self.path, f"{where} <pose>")
-                    local = Pose(rpy_matrix(*v[3:]), np.array(v[:3]))
-                jf = base @ local
+                jf = base @ _pose(pose_el, self.path, f"{where} <pose>")
                 xyz_el = el.find("axis/xyz")
                 xyz = np.array(numbers(xyz_el.text if xyz_el is not None else None, 3,
                                        self.path, f"{where} <axis><xyz>",
