@@ -18,7 +18,7 @@ from vjm_ros.studies.bench.grid import (
     jsonable,
 )
 from vjm_ros.studies.bench.runs import (
-    _efforts,
+    _started,
 )
 
 
@@ -51,9 +51,7 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
     scene = load_scene(scene_name)
     if settings is None:
         settings = resolve_settings(scene.defaults, scene.gains)
-    sim = Simulator(scene.model, settings, scene.gains, scene.plant)
-    if scene.model.actuators:
-        sim.set_efforts(_efforts(scene))
+    sim = _started(scene, Simulator(scene.model, settings, scene.gains, scene.plant))
     ticks = int(round(seconds * settings.rate))
     s0 = sim.sample()
     tv0 = float(s0.energy[0] + s0.energy[1])

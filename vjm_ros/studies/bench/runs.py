@@ -70,15 +70,9 @@ BLOCK_TICKS = RUN_BLOCK_TICKS
 (:data:`vjm_ros.sim.samples.RUN_BLOCK_TICKS`)."""
 
 
-def _efforts(scene: Scene) -> np.ndarray:
-    return np.array([a.effort for a in scene.model.actuators], dtype=float)
-
-
 def _exact_run(scene: Scene, horizon: float, rate: float, opts: dict) -> tuple[np.ndarray, np.ndarray, float]:
     settings = SimulationSettings(closure="exact", rate=rate, **opts)
-    sim = Simulator(scene.model, settings, scene.gains, scene.plant)
-    if scene.model.actuators:
-        sim.set_efforts(_efforts(scene))
+    sim = _started(scene, Simulator(scene.model, settings, scene.gains, scene.plant))
     ticks = int(round(horizon * rate))
     p0, e0 = _positions(scene.model, sim.q)
     pts = np.zeros((ticks + 1,) + p0.shape)
@@ -185,7 +179,7 @@ def _make_vjm(scene: Scene, cfg: RowConfig) -> Simulator:
 def _started(scene: Scene, sim):
     """``sim`` with the scene's default efforts applied (a simulator of either engine)."""
     if scene.model.actuators:
-        sim.set_efforts(_efforts(scene))
+        sim.set_efforts(np.array([a.effort for a in scene.model.actuators], dtype=float))
     return sim
 
 
