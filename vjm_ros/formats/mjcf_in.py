@@ -64,7 +64,7 @@ def read_mjcf(path: str) -> JointGraph:
 
 class _MjcfReader:
     def __init__(self, path, root, m, mujoco):
-        self.path, self.root, self.m, self.mj = path, root, m, mujoco
+        self.path, self.m, self.mj = path, m, mujoco
         self.name = root.get("model", "mujoco")
 
     def obj_name(self, kind, i: int) -> str:

@@ -366,18 +366,17 @@ def _pose_text(x: float, y: float, yaw: float = 0.0) -> str:
 
 
 def _sdf_joint(parent: ET.Element, name: str, kind: str, parent_link: str, child_link: str,
-               pose: str, axis: tuple[float, float, float] | None = None) -> None:
+               pose: str, axis: tuple[float, float, float]) -> None:
     j = ET.SubElement(parent, "joint", name=name, type=kind)
     ET.SubElement(j, "parent").text = parent_link
     ET.SubElement(j, "child").text = child_link
     ET.SubElement(j, "pose").text = pose
-    if axis is not None:
-        a = ET.SubElement(j, "axis")
-        ET.SubElement(a, "xyz").text = numbers(*axis)
-        if kind == "prismatic":
-            lim = ET.SubElement(a, "limit")
-            ET.SubElement(lim, "lower").text = number(-UNBOUNDED)
-            ET.SubElement(lim, "upper").text = number(UNBOUNDED)
+    a = ET.SubElement(j, "axis")
+    ET.SubElement(a, "xyz").text = numbers(*axis)
+    if kind == "prismatic":
+        lim = ET.SubElement(a, "limit")
+        ET.SubElement(lim, "lower").text = number(-UNBOUNDED)
+        ET.SubElement(lim, "upper").text = number(UNBOUNDED)
 
 
 def _carriage(parent: ET.Element, name: str, x: float, y: float, yaw: float) -> None:
