@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Sequence
+from operator import attrgetter
+from typing import TypeVar
 
 from vjm_ros.studies.bench.grid import (
     LIVE_HEADROOM,
@@ -14,6 +16,32 @@ from vjm_ros.studies.bench.grid import (
 from vjm_ros.studies.bench.runs import (
     RowResult,
 )
+
+T = TypeVar("T")
+
+
+def lowest_front(items: Iterable[T], cost: Callable[[T], float | None],
+                 error: Callable[[T], float | None]) -> list[T]:
+    """Items no other item beats on both ``cost`` and ``error``, cheapest first.
+
+    Parameters
+    ----------
+    items : iterable
+        Items whose ``cost`` or ``error`` is None are left out.
+    cost, error : callable
+        The two measures of an item (lower is better).
+
+    Returns
+    -------
+    list
+    """
+    front, best = [], math.inf
+    for x in sorted((x for x in items if cost(x) is not None and error(x) is not None),
+                    key=lambda x: (cost(x), error(x))):
+        if error(x) < best:
+            front.append(x)
+            best = error(x)
+    return front
 
 
 def pareto_front(rows: Sequence[RowResult]) -> list[RowResult]:
@@ -28,15 +56,8 @@ def pareto_front(rows: Sequence[RowResult]) -> list[RowResult]:
     -------
     list of RowResult
     """
-    cand = [r for r in rows if r.ok and r.wall_per_sim_s is not None
-            and r.position_deviation is not None]
-    cand.sort(key=lambda r: (r.wall_per_sim_s, r.position_deviation))
-    front, best = [], math.inf
-    for r in cand:
-        if r.position_deviation < best:
-            front.append(r)
-            best = r.position_deviation
-    return front
+    return lowest_front([r for r in rows if r.ok], attrgetter("wall_per_sim_s"),
+                        attrgetter("position_deviation"))
 
 
 def _live_ok(r: RowResult) -> bool:

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from vjm_ros.scene import load_scene
+from vjm_ros.studies.bench.analysis import lowest_front
 from vjm_ros.studies.sweep.spec import SweepSpec
 from vjm_ros.studies.sweep.summary import readable_axis
 
@@ -79,15 +80,8 @@ def read_rows(table: str | Path) -> list[dict]:
 
 def pareto_front(rows: list[dict]) -> list[dict]:
     """Rows no other row beats on both wall time and largest closure error, cheapest first."""
-    cost, error = "wall_time", "max_closure_error"
-    ok = sorted((r for r in rows if r.get("status") == "ok" and r.get(cost) is not None
-                 and r.get(error) is not None), key=lambda r: (r[cost], r[error]))
-    front, best = [], math.inf
-    for r in ok:
-        if r[error] < best:
-            front.append(r)
-            best = r[error]
-    return front
+    return lowest_front([r for r in rows if r.get("status") == "ok"],
+                        lambda r: r.get("wall_time"), lambda r: r.get("max_closure_error"))
 
 
 def stability_edge(rows: list[dict]) -> dict[float, float | None]:
