@@ -251,10 +251,7 @@ def _exact_findings(vjm_rows: list[RowResult]) -> list[str]:
 def _guard_findings(vjm_rows: list[RowResult]) -> list[str]:
     """Rows refused by the stiffness check or stopped by the divergence guard."""
     out = []
-    refused: dict[str, int] = {}
-    for r in vjm_rows:
-        if r.status == REFUSED:
-            refused[r.integrator] = refused.get(r.integrator, 0) + 1
+    refused = Counter(r.integrator for r in vjm_rows if r.status == REFUSED)
     if refused:
         text = ("- **Refused by the stiffness check** (ω_n·h beyond the method's bound, before "
                 "running): " + ", ".join(_plural(v, k + " row") for k, v in sorted(refused.items()))

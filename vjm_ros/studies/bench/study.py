@@ -8,6 +8,7 @@ import os
 import platform
 import shutil
 import time
+from collections import Counter
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -260,11 +261,8 @@ def _scene_summary(sc: Scene, horizon: float, ref_info: dict, rows: list[RowResu
 
 def _analysis(rows: list[RowResult]) -> dict:
     """Counts, Pareto fronts, tiers and the MuJoCo comparison of one scene's rows."""
-    counts: dict[str, int] = {}
-    for r in rows:
-        counts[r.status] = counts.get(r.status, 0) + 1
     return {
-        "counts": counts,
+        "counts": dict(Counter(r.status for r in rows)),
         "pareto": {
             "vjm": [r.key for r in pareto_front([r for r in rows if r.engine == "vjm"])],
             "mujoco": [r.key for r in pareto_front([r for r in rows if r.engine == "mujoco"])],

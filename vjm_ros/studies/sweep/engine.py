@@ -21,6 +21,7 @@ import math
 import os
 import sys
 import time
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -266,9 +267,7 @@ class Sweep:
             for batch in batches
         ]
         bar = SweepProgress(len(self.todo), progress)
-        statuses: dict[str, int] = {}
-        for row in self.start.kept:
-            statuses[row["status"]] = statuses.get(row["status"], 0) + 1
+        statuses = Counter(row["status"] for row in self.start.kept)
         written = {"n": 0, "failed": 0, "errors": 0}
         started = time.perf_counter()
         interrupted = False
@@ -276,7 +275,7 @@ class Sweep:
         def put(writer, row: dict) -> None:
             writer.writerow({k: cell(row.get(k)) for k in columns})
             status = str(row.get("status"))
-            statuses[status] = statuses.get(status, 0) + 1
+            statuses[status] += 1
             written["n"] += 1
             written["failed"] += status != "ok"
             written["errors"] += status == FAILED
