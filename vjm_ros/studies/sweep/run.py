@@ -66,27 +66,22 @@ def apply_parameters(base: Scene, parameters: dict, where=lambda key: f"grid.{ke
     for key, value in parameters.items():
         kind, _, name = key.partition(".")
         if kind in ("mass", "length", "inertia"):
-            links = [link for lname, link, _, _ in parts if lname == name]
-            if not links:
-                raise ConfigurationError(
-                    f"{where(key)}: expected a link of {base.name} "
-                    f"({', '.join(p[0] for p in parts)}), found {name!r}")
-            links[0][kind] = value
+            what, named = "a link", [(lname, link) for lname, link, _, _ in parts]
         elif kind == "initial":
-            joints = [joint for _, _, jname, joint in parts if jname == name]
-            if not joints:
-                raise ConfigurationError(
-                    f"{where(key)}: expected a joint of {base.name} "
-                    f"({', '.join(p[2] for p in parts)}), found {name!r}")
-            joints[0]["slide" if joints[0].get("type") == "prismatic" else "angle"] = value
+            what, named = "a joint", [(jname, joint) for _, _, jname, joint in parts]
         elif kind == "effort":
-            acts = [a for a in doc.get("actuators") or [] if a.get("joint") == name]
-            if not acts:
-                raise ConfigurationError(
-                    f"{where(key)}: expected an actuated joint of {base.name} "
-                    f"({', '.join(a.get('joint', '?') for a in doc.get('actuators') or [])}), "
-                    f"found {name!r}")
-            acts[0]["effort"] = value
+            what, named = "an actuated joint", [(a.get("joint", "?"), a)
+                                                for a in doc.get("actuators") or []]
+        else:
+            continue
+        found = [part for n, part in named if n == name]
+        if not found:
+            raise ConfigurationError(
+                f"{where(key)}: expected {what} of {base.name} "
+                f"({', '.join(n for n, _ in named)}), found {name!r}")
+        if kind == "initial":
+            kind = "slide" if found[0].get("type") == "prismatic" else "angle"
+        found[0][kind] = value
     source = f"{base.name} with {json.dumps(parameters, sort_keys=True)}"
     return parse_scene(yaml.safe_dump(doc, sort_keys=False), source=source)
 
