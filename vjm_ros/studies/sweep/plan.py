@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.scene import Scene
-from vjm_ros.sim.settings import SimulationSettings, resolve_settings
+from vjm_ros.sim.settings import USER_SETTINGS, SimulationSettings, resolve_settings
 from vjm_ros.studies.sweep.run import _base_scene, apply_parameters, scene_source
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
 
@@ -63,9 +63,7 @@ def same_run(settings: SimulationSettings) -> tuple[tuple, str]:
     steps as ``semi_implicit_euler``; the penalty closure ignores the Baumgarte gains and
     projection. (Whether that holds is checked by running both, in the tests.)
     """
-    fields = {k: getattr(settings, k) for k in
-              ("integrator", "closure", "rate", "substeps", "kp", "kv", "omega_n", "zeta",
-               "alpha", "beta", "projection", "rtol", "atol", "kernel", "check_stiffness")}
+    fields = {k: getattr(settings, k) for k in (*USER_SETTINGS, "kernel", "check_stiffness")}
     ignored = EXACT_ONLY if settings.closure == "penalty" else PENALTY_ONLY
     why = f"the {settings.closure} closure does not read {', '.join(ignored)}"
     for k in ignored:

@@ -38,12 +38,9 @@ from vjm_ros.core.compiled import KERNELS
 from vjm_ros.core.errors import ConfigurationError, SceneError
 from vjm_ros.core.integrators import INTEGRATORS
 from vjm_ros.scene.safe_yaml import parse_yaml
-from vjm_ros.sim.settings import SimulationSettings
+from vjm_ros.sim.settings import USER_SETTINGS, SimulationSettings
 
-SETTINGS = (
-    "integrator", "closure", "rate", "substeps", "kp", "kv", "omega_n", "zeta", "alpha", "beta",
-    "projection", "rtol", "atol", "kernel", "duration",
-)
+SETTINGS = (*USER_SETTINGS, "kernel", "duration")
 """Settings a spec may fix or sweep: those of ``vjm run`` (``duration`` in simulated s)."""
 SCENE_PARAMETERS = ("mass", "length", "inertia", "initial", "effort")
 """Scene parameters a spec may sweep, as ``<kind>.<link or joint name>``."""
