@@ -82,13 +82,6 @@ class TableStart:
         return {row["key"] for row in self.kept}
 
 
-def _read(path: Path) -> tuple[list[str] | None, list[dict]]:
-    with path.open(newline="") as f:
-        reader = csv.DictReader(f)
-        rows = list(reader)
-        return reader.fieldnames, rows
-
-
 def inspect_table(out: Path, columns: list[str], keys: set[str], resume: bool,
                   overwrite: bool) -> TableStart:
     """Check what ``out``'s table holds against the spec, without writing anything.
@@ -106,7 +99,9 @@ def inspect_table(out: Path, columns: list[str], keys: set[str], resume: bool,
     if not path.exists():
         return start
     try:
-        header, rows = _read(path)
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            rows, header = list(reader), reader.fieldnames
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise ConfigurationError(f"{path}: expected a results table, found {exc}") from None
     if not rows:
