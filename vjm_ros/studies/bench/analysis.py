@@ -73,8 +73,8 @@ def _live_ok(r: RowResult) -> bool:
             and r.position_deviation is not None)
 
 
-def recommend(rows: Sequence[RowResult], engine: str = "vjm") -> dict:
-    """The recommended row per tier for one scene.
+def recommend(rows: Sequence[RowResult]) -> dict:
+    """The recommended vjm row per tier for one scene.
 
     ``live 1 kHz``: among fixed-step rows at 1 kHz at least :data:`LIVE_HEADROOM` times faster
     than real time (CPU time, see :func:`_live_ok`), the smallest position error (ties: the
@@ -86,7 +86,7 @@ def recommend(rows: Sequence[RowResult], engine: str = "vjm") -> dict:
     dict
         Tier name to the row's key, label, cost and errors (None when no row qualifies).
     """
-    mine = [r for r in rows if r.engine == engine and r.ok and r.position_deviation is not None
+    mine = [r for r in rows if r.engine == "vjm" and r.ok and r.position_deviation is not None
             and r.wall_per_sim_s is not None]
     out = {}
     for tier, tol in TIERS:
