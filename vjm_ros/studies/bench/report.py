@@ -98,11 +98,8 @@ def plot_pareto(name: str, rows: Sequence[RowResult], summary: dict, path: Path)
     handles = [Line2D([], [], linestyle="", marker="^" if k in MJ_INTEGRATORS else "o", color=c,
                       label=f"MuJoCo {k}" if k in MJ_INTEGRATORS else k)
                for k, c in _COLORS.items() if any(r.integrator == k for r in pts)]
-    handles += [
-        Line2D([], [], linestyle="", marker="o", color="gray", label="penalty closure"),
-        Line2D([], [], linestyle="", marker="s", color="gray", label="exact closure"),
-        Line2D([], [], linestyle="", marker="D", color="gray", label="exact + projection"),
-    ]
+    handles += [Line2D([], [], linestyle="", marker=m, color="gray", label=label) for m, label in
+                (("o", "penalty closure"), ("s", "exact closure"), ("D", "exact + projection"))]
     handles += ax.get_legend_handles_labels()[0]
     ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
