@@ -158,9 +158,8 @@ def recommend_overall(scenes: dict) -> dict:
         out[tier] = {
             "key": best,
             "label": next(iter(rs.values())).label,
-            "worst_position_deviation": max(r.position_deviation for r in rs.values()),
-            "worst_max_closure_error": max(r.max_closure_error for r in rs.values()),
-            "worst_wall_per_sim_s": max(r.wall_per_sim_s for r in rs.values()),
+            **{f"worst_{a}": max(getattr(r, a) for r in rs.values())
+               for a in ("position_deviation", "max_closure_error", "wall_per_sim_s")},
             "worst_cpu_per_sim_s": max((r.cpu_per_sim_s or r.wall_per_sim_s) for r in rs.values()),
             "per_scene": {n: _brief(r) for n, r in rs.items()},
         }
