@@ -105,8 +105,7 @@ def _slope(ns: Sequence[float], costs: Sequence[float]) -> float | None:
     pairs = [(math.log(n), math.log(c)) for n, c in zip(ns, costs, strict=True) if n >= 4 and c and c > 0]
     if len(pairs) < 2:
         return None
-    x = np.array([p[0] for p in pairs])
-    y = np.array([p[1] for p in pairs])
+    x, y = np.array(pairs).T
     return float(np.polyfit(x, y, 1)[0])
 
 
