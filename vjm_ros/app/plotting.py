@@ -258,7 +258,7 @@ def _draw_ground(ax, ground) -> list:
 def displacements_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute link angles and, when the scene has prismatic joints, the joint slides.
 
-    Arguments and result as :func:`displacements_figure`.
+    Arguments and result as :func:`chrono_cyclograph_figure`.
     """
     return _kinematics_figure(traj, name, "displacements")
 
@@ -266,7 +266,7 @@ def displacements_figure(traj: Trajectory, name: str) -> Figure:
 def velocities_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute angular velocities of the links and, if any, the slide rates.
 
-    Arguments and result as :func:`displacements_figure`.
+    Arguments and result as :func:`chrono_cyclograph_figure`.
     """
     return _kinematics_figure(traj, name, "velocities")
 
@@ -274,7 +274,7 @@ def velocities_figure(traj: Trajectory, name: str) -> Figure:
 def accelerations_figure(traj: Trajectory, name: str) -> Figure:
     """Absolute angular accelerations of the links and, if any, the slide accelerations.
 
-    Arguments and result as :func:`displacements_figure`.
+    Arguments and result as :func:`chrono_cyclograph_figure`.
     """
     return _kinematics_figure(traj, name, "accelerations")
 
@@ -300,16 +300,31 @@ _KINEMATICS = {
 
 
 def _kinematics_figure(traj: Trajectory, name: str, kind: str) -> Figure:
-    (angles, coords), labels, titles = _KINEMATICS[kind]
-    values = traj[coords]
-    absolute = traj[angles] if angles else absolute_rates(traj.model, values)
-    return _motion_figure(traj, absolute, values, f"{name}: {kind}", labels, titles)
+    """Angular quantity per link on top; the prismatic joints' coordinates of ``kind`` below."""
+    (angles, coords), ylabels, titles = _KINEMATICS[kind]
+    model = traj.model
+    joint = traj[coords]
+    angular = traj[angles] if angles else absolute_rates(model, joint)
+    prismatic = np.flatnonzero(~model.is_revolute)
+    fig = _new_figure(_TWO_PANEL_SIZE if len(prismatic) else _SERIES_SIZE)
+    fig.suptitle(f"{name}: {kind}")
+
+    def style(i: int, label: str) -> dict:
+        return {"color": _link_color(i, model.n), "ls": _chain_style(model.links[i].chain),
+                "label": label}
+
+    _fill_panels(fig, traj["t"], [
+        (ylabels[0], titles[0],
+         [(angular[:, i], style(i, link.name)) for i, link in enumerate(model.links)]),
+        (ylabels[1], titles[1], [(joint[:, i], style(i, model.joints[i].name)) for i in prismatic]),
+    ])
+    return fig
 
 
 def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     """World-frame closure forces (and moments of angle closures) against time.
 
-    Arguments and result as :func:`displacements_figure`.
+    Arguments and result as :func:`chrono_cyclograph_figure`.
     """
     model = traj.model
     t = traj["t"]
@@ -317,10 +332,9 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     names, moment = model.force_names, model.force_is_moment  # closures, then stops
     point_closures = [k for k, m in enumerate(moment) if not m]
     angle_closures = [k for k, m in enumerate(moment) if m]
-    panels = int(bool(point_closures)) + int(bool(angle_closures))
-    fig = _new_figure(_TWO_PANEL_SIZE if panels == 2 else _SERIES_SIZE)
+    fig = _new_figure(_TWO_PANEL_SIZE if point_closures and angle_closures else _SERIES_SIZE)
     fig.suptitle(f"{name}: constraint forces at the closure points")
-    if panels == 0:
+    if not moment:
         ax = fig.add_subplot()
         ax.text(
             0.5, 0.5, "no closures in this scene", ha="center", va="center", transform=ax.transAxes
@@ -328,48 +342,41 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
         ax.set_xlabel("t (s)")
         ax.set_ylabel("force (N)")
         return fig
-    axes = fig.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
-    row = 0
-    if point_closures:
-        ax = axes[row]
-        for j, k in enumerate(point_closures):
-            color = f"C{j % 10}"
-            _series(ax, t, force[:, k, 0], color=color, ls="-", label=f"{names[k]} Fx")
-            _series(ax, t, force[:, k, 1], color=color, ls="--", label=f"{names[k]} Fy")
-        ax.set_ylabel("force (N)")
-        ax.set_title("forces on the constrained points, world frame", fontsize="medium")
-        _legend(ax, ax.get_lines())
-        row += 1
-    if angle_closures:
-        ax = axes[row]
-        for j, k in enumerate(angle_closures):
-            color = f"C{(j + len(point_closures)) % 10}"
-            _series(ax, t, force[:, k, 2], color=color, ls="-", label=f"{names[k]} Mz")
-        ax.set_ylabel("moment (N m)")
-        ax.set_title("moments of the angle closures and the stops", fontsize="medium")
-        _legend(ax, ax.get_lines())
-    _time_axes(axes, t)
+    point_series = [
+        (force[:, k, axis], {"color": f"C{j % 10}", "ls": ls, "label": f"{names[k]} F{xy}"})
+        for j, k in enumerate(point_closures)
+        for axis, xy, ls in ((0, "x", "-"), (1, "y", "--"))
+    ]
+    angle_series = [
+        (force[:, k, 2], {"color": f"C{(j + len(point_closures)) % 10}", "ls": "-",
+                          "label": f"{names[k]} Mz"})
+        for j, k in enumerate(angle_closures)
+    ]
+    _fill_panels(fig, t, [
+        ("force (N)", "forces on the constrained points, world frame", point_series),
+        ("moment (N m)", "moments of the angle closures and the stops", angle_series),
+    ])
     return fig
 
 
 def energy_figure(traj: Trajectory, name: str) -> Figure:
     """Kinetic, potential, constraint (if non-zero) and total energy against time.
 
-    Arguments and result as :func:`displacements_figure`.
+    Arguments and result as :func:`chrono_cyclograph_figure`.
     """
     t = traj["t"]
     energy = traj["energy"]
+    series = [
+        (energy[:, 0], {"color": "C0", "ls": "-", "label": "kinetic T"}),
+        (energy[:, 1], {"color": "C1", "ls": "-", "label": "potential V"}),
+        (energy[:, 2], {"color": "C2", "ls": ":", "label": "constraint (penalty)"}),
+        (energy[:, 3], {"color": "k", "ls": "-", "lw": 1.8, "label": "total"}),
+    ]
+    if not np.any(energy[:, 2] != 0.0):
+        del series[2]
     fig = _new_figure(_SERIES_SIZE)
-    ax = fig.add_subplot()
-    _series(ax, t, energy[:, 0], color="C0", ls="-", label="kinetic T")
-    _series(ax, t, energy[:, 1], color="C1", ls="-", label="potential V")
-    if np.any(energy[:, 2] != 0.0):
-        _series(ax, t, energy[:, 2], color="C2", ls=":", label="constraint (penalty)")
-    _series(ax, t, energy[:, 3], color="k", ls="-", lw=1.8, label="total")
-    ax.set_ylabel("energy (J)")
     fig.suptitle(f"{name}: kinetic, potential and total energy")
-    _legend(ax, ax.get_lines())
-    _time_axes([ax], t)
+    _fill_panels(fig, t, [("energy (J)", "", series)])
     return fig
 
 
@@ -381,55 +388,22 @@ def _new_figure(size: tuple[float, float]) -> Figure:
     return fig
 
 
-def _motion_figure(
-    traj: Trajectory,
-    angular: np.ndarray,
-    joint: np.ndarray,
-    title: str,
-    ylabels: tuple[str, str],
-    panel_titles: tuple[str, str],
-) -> Figure:
-    """Angular quantity per link on top; the prismatic joints' entries of ``joint`` below."""
-    model = traj.model
-    t = traj["t"]
-    prismatic = np.flatnonzero(~model.is_revolute)
-    panels = 2 if len(prismatic) else 1
-    fig = _new_figure(_TWO_PANEL_SIZE if panels == 2 else _SERIES_SIZE)
-    fig.suptitle(title)
-    axes = fig.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
+def _fill_panels(fig: Figure, t: np.ndarray, panels: Sequence[tuple[str, str, list]]) -> None:
+    """One panel per entry with series, stacked over a common time axis.
 
-    ax = axes[0]
-    for i, link in enumerate(model.links):
-        _series(
-            ax,
-            t,
-            angular[:, i],
-            color=_link_color(i, model.n),
-            ls=_chain_style(link.chain),
-            label=link.name,
-        )
-    ax.set_ylabel(ylabels[0])
-    ax.set_title(panel_titles[0], fontsize="medium")
-    _legend(ax, ax.get_lines())
-
-    if panels == 2:
-        ax = axes[1]
-        for i in prismatic:
-            joint_i = model.joints[i]
-            chain = model.links[i].chain
-            _series(
-                ax,
-                t,
-                joint[:, i],
-                color=_link_color(i, model.n),
-                ls=_chain_style(chain),
-                label=joint_i.name,
-            )
-        ax.set_ylabel(ylabels[1])
-        ax.set_title(panel_titles[1], fontsize="medium")
+    ``panels`` holds ``(ylabel, panel title, series)`` with ``series`` a list of ``(y, style)``,
+    ``y`` of shape (rows,) and ``style`` the keywords of :func:`_series`; panels without series
+    are left out.
+    """
+    panels = [panel for panel in panels if panel[2]]
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (ylabel, title, series) in zip(axes, panels, strict=True):
+        for y, style in series:
+            _series(ax, t, y, **style)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title, fontsize="medium")
         _legend(ax, ax.get_lines())
     _time_axes(axes, t)
-    return fig
 
 
 def _series(
