@@ -14,6 +14,7 @@ without it; see :mod:`vjm_ros.logs.storage`); 130 interrupted by SIGINT and 143 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -123,12 +124,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--json", action="store_true", help="print the summary as JSON on the last line")
 
-    b = sub.add_parser("bench", help="speed/accuracy study", add_help=False)
-    b.add_argument("rest", nargs=argparse.REMAINDER)
-    sw = sub.add_parser("sweep", help="a grid of runs from a spec, on Dask", add_help=False)
-    sw.add_argument("rest", nargs=argparse.REMAINDER)
-    tu = sub.add_parser("tune", help="penalty gains for an integrator and step", add_help=False)
-    tu.add_argument("rest", nargs=argparse.REMAINDER)
+    for name, text in (("bench", "speed/accuracy study"),
+                       ("sweep", "a grid of runs from a spec, on Dask"),
+                       ("tune", "penalty gains for an integrator and step")):
+        sub.add_parser(name, help=text, add_help=False).add_argument(
+            "rest", nargs=argparse.REMAINDER)
     from vjm_ros.app import export_cli, import_cli, model_cli
 
     model_cli.add_parser(sub)
@@ -176,18 +176,8 @@ def _main(argv: list[str] | None) -> int:
             return _cmd_scenes()
         if args.command == "run":
             return _cmd_run(args)
-        if args.command == "model":
-            from vjm_ros.app import model_cli
-
-            return model_cli.run(args)
-        if args.command == "import":
-            from vjm_ros.app import import_cli
-
-            return import_cli.run(args)
-        if args.command == "export":
-            from vjm_ros.app import export_cli
-
-            return export_cli.run(args)
+        if args.command in ("model", "import", "export"):
+            return importlib.import_module(f"vjm_ros.app.{args.command}_cli").run(args)
         if args.command == "replay":
             from vjm_ros.logs.replay import replay
 
@@ -247,20 +237,10 @@ def _settings(args, scene):
     return resolve_settings(
         scene.defaults,
         scene.gains,
-        integrator=args.integrator,
-        closure=args.closure,
-        rate=args.rate,
-        substeps=args.substeps,
-        kp=args.kp,
-        kv=args.kv,
-        omega_n=args.omega_n,
-        zeta=args.zeta,
-        alpha=args.alpha,
-        beta=args.beta,
+        **{key: getattr(args, key) for key in ("integrator", "closure", "rate", "substeps", "kp",
+                                               "kv", "omega_n", "zeta", "alpha", "beta", "rtol",
+                                               "atol", "kernel")},
         projection=True if args.projection else None,
-        rtol=args.rtol,
-        atol=args.atol,
-        kernel=args.kernel,
         check_stiffness=not args.no_stiffness_check,
         flag=lambda key: "--" + key.replace("_", "-"),
     )
@@ -403,11 +383,6 @@ def _prepare_dir(path: Path) -> None:
         ) from None
 
 
-def _bag_file(bag: Path) -> Path:
-    """The MCAP file of a bag directory, named as rosbag2 names it: ``<dir>/<dir name>_0.mcap``."""
-    return bag / f"{bag.name}_0.mcap"
-
-
 def _prepare_bag(bag: Path) -> None:
     if bag.exists() and (not bag.is_dir() or any(bag.iterdir())):
         raise ConfigurationError(f"--bag {bag}: expected a new or empty directory, found one in use")
@@ -438,7 +413,7 @@ def _log_openers(args, scene, sim, duration: float) -> list:
         if args.mcap is not None:
             raise ConfigurationError("give either --mcap FILE or --bag DIR, not both")
         _prepare_bag(args.bag)
-        mcap = _bag_file(args.bag)
+        mcap = args.bag / f"{args.bag.name}_0.mcap"  # named as rosbag2 names it
     return recorder_openers(
         scene.model,
         sim.describe(),
@@ -457,37 +432,16 @@ def _report_log_failure(where: str, why: str) -> None:
 
 
 def _run_info(sim, wall: float) -> dict:
-    info = sim.describe()
     steps = sim.ticks * (sim.settings.substeps if sim.integrator.fixed_step else 1)
-    info.update(
-        {
-            "wall_time": wall,
-            "ticks": sim.ticks,
-            "steps": steps,
+    return {**sim.describe(), "wall_time": wall, "ticks": sim.ticks, "steps": steps,
             "realtime_factor": (sim.t / wall) if wall > 0 else float("inf"),
-            "evaluations": sim.mechanism.evaluations,
-        }
-    )
-    return info
+            "evaluations": sim.mechanism.evaluations}
 
 
 def _print_summary(summary: dict) -> None:
-    keys = [
-        "scene",
-        "integrator",
-        "closure",
-        "rate",
-        "substeps",
-        "sim_time",
-        "wall_time",
-        "steps",
-        "realtime_factor",
-        "max_closure_error",
-        "rms_closure_error",
-        "energy_drift",
-        "energy_balance_residual",
-        "finite",
-    ]
+    keys = ("scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time", "steps",
+            "realtime_factor", "max_closure_error", "rms_closure_error", "energy_drift",
+            "energy_balance_residual", "finite")
     for k in keys:
         v = summary.get(k)
         if isinstance(v, float):
