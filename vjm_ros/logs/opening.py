@@ -23,7 +23,22 @@ def recorder_openers(
 ) -> list[tuple[str, Callable[[], object]]]:
     """The storage checks of the logs asked for, then one function per log that opens it.
 
-    Parameters are those of :func:`open_recorders`.
+    Parameters
+    ----------
+    model : Model
+    settings : dict
+        Run settings written into the logs (``Simulator.describe()`` plus what the caller adds).
+    scene_text : str
+        The scene YAML, attached to the MCAP log.
+    mcap, rrd : str, optional
+        Log paths (or ``rerun`` targets such as ``rerun+http://...`` for ``rrd``); None or ""
+        for no log.
+    duration : float
+        Simulated seconds the run will last (0: unknown), for the free-space check, s.
+    rate : float
+        Control ticks per second, Hz.
+    keys : tuple of str
+        How the two logs are named in error messages (``("--mcap", "--rrd")`` on the command line).
 
     Returns
     -------
@@ -63,35 +78,14 @@ def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_tex
         raise ConfigurationError(f"{key}: cannot open {path!r} ({reason})") from None
 
 
-def open_recorders(
-    model: Model,
-    settings: dict,
-    scene_text: str,
-    *,
-    mcap: str | None = None,
-    rrd: str | None = None,
-    duration: float = 0.0,
-    rate: float = 1000.0,
-    keys: tuple[str, str] = ("mcap", "rrd"),
-) -> list:
+def open_recorders(model: Model, settings: dict, scene_text: str, **options) -> list:
     """The MCAP and rerun recorders asked for, after the storage checks.
 
     Parameters
     ----------
-    model : Model
-    settings : dict
-        Run settings written into the logs (``Simulator.describe()`` plus what the caller adds).
-    scene_text : str
-        The scene YAML, attached to the MCAP log.
-    mcap, rrd : str, optional
-        Log paths (or ``rerun`` targets such as ``rerun+http://...`` for ``rrd``); None or ""
-        for no log.
-    duration : float
-        Simulated seconds the run will last (0: unknown), for the free-space check, s.
-    rate : float
-        Control ticks per second, Hz.
-    keys : tuple of str
-        How the two logs are named in error messages (``("--mcap", "--rrd")`` on the command line).
+    model, settings, scene_text, **options
+        As for :func:`recorder_openers` (``options``: ``mcap``, ``rrd``, ``duration``, ``rate``,
+        ``keys``).
 
     Returns
     -------
@@ -104,11 +98,9 @@ def open_recorders(
         A recorder is not available, a path fails the checks of
         :func:`~vjm_ros.logs.storage.check_log_path`, or a file cannot be opened.
     """
-    openers = recorder_openers(model, settings, scene_text, mcap=mcap, rrd=rrd,
-                               duration=duration, rate=rate, keys=keys)
     recorders: list = []
     try:
-        for _, opener in openers:
+        for _, opener in recorder_openers(model, settings, scene_text, **options):
             recorders.append(opener())
     except ConfigurationError:
         for rec in recorders:
