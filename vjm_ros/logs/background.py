@@ -202,32 +202,29 @@ class BlockFanOut:
         if started:
             self._finish(consumer)
 
-    def _write(self, consumer: Consumer, block) -> bool:
-        """Hand ``block`` to the consumer; whether it took it without raising."""
+    def _call(self, step, *args) -> bool:
+        """Run one of a consumer's ``start``, ``write`` or ``finish`` (None: nothing to run);
+        whether it returned without raising (what it raised is kept for the caller)."""
         try:
-            consumer.write(block)
+            if step is not None:
+                step(*args)
         except BaseException as exc:  # noqa: BLE001 - raised again in the caller
             self._errors.append(exc)
             return False
         return True
 
+    def _write(self, consumer: Consumer, block) -> bool:
+        """Hand ``block`` to the consumer; whether it took it without raising."""
+        return self._call(consumer.write, block)
+
     def _finish(self, consumer: Consumer) -> None:
-        if consumer.finish is not None:
-            try:
-                consumer.finish()
-            except BaseException as exc:  # noqa: BLE001 - raised again in the caller
-                self._errors.append(exc)
+        self._call(consumer.finish)
 
     def _start(self, consumer: Consumer) -> bool:
         """Run the consumer's ``start``; whether it started."""
-        started = True
-        if consumer.start is not None:
-            try:
-                consumer.start()
-            except BaseException as exc:  # noqa: BLE001 - raised again in the caller
-                started = False
-                self._start_failed = True
-                self._errors.append(exc)
+        started = self._call(consumer.start)
+        if not started:
+            self._start_failed = True
         self._count_start()
         return started
 
