@@ -347,21 +347,11 @@ def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float
 
     Parameters
     ----------
-    sample : Sample
+    sample, force_scale, line_width, trace
+        As for :func:`marker_specs` (``trace``: the node's ``tip_trace`` markers).
     ns : int
         Header stamp, ns.
-    force_scale : float
-        Arrow length per newton, m/N.
-    line_width : float
-        Link line width, m.
-    trace : sequence of ndarray, shape (m, 2)
-        Recent positions of each chain tip, m (the node's ``tip_trace`` markers).
     """
-    return {
-        "markers": [
-            marker(ns, namespace, marker_id, kind, points, scale, _rgba(*rgba))
-            for namespace, marker_id, kind, points, scale, rgba in marker_specs(
-                sample, force_scale, line_width, trace
-            )
-        ]
-    }
+    specs = marker_specs(sample, force_scale, line_width, trace)
+    return {"markers": [marker(ns, namespace, marker_id, kind, points, scale, _rgba(*rgba))
+                        for namespace, marker_id, kind, points, scale, rgba in specs]}
