@@ -385,11 +385,7 @@ class TickLoop:
         return self.poll_inputs is not None and self.polls_inputs
 
     def _interrupted(self) -> bool:
-        return (
-            self._stop
-            or self._paused
-            or self._resets_asked > self._resets_done
-        )
+        return self._stop or self._paused or self._resets_asked > self._resets_done
 
     def _tick(self) -> None:
         self.ticks += 1
@@ -465,10 +461,9 @@ class TickLoop:
         sim = self.sim
         if sim.measured is None:
             self.outputs.joints(t, sim.q, sim.qd, sim.tau)
-            return
-        measured = sim.measured
-        self.outputs.joints(t, measured[0], measured[1], measured[2])
-        self.outputs.ground_truth(t, sim.q, sim.qd, sim.tau)
+        else:
+            self.outputs.joints(t, *sim.measured)  # rows: position, velocity, effort
+            self.outputs.ground_truth(t, sim.q, sim.qd, sim.tau)
 
     def _emit(self, sample: Sample) -> None:
         """Outputs of a state that starts an episode (t = 0)."""
