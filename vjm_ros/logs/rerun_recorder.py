@@ -71,7 +71,6 @@ SERIES = {
 }
 MEASURED = ("series/measured/position", "series/measured/velocity", "series/measured/effort")
 """Entities of the sensors' measurements (a scene with sensors), position, velocity, effort."""
-_CONNECT_SCHEMES = VIEWER_SCHEMES
 _LINK_COLORS = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75]],
     dtype=np.uint8,
@@ -188,7 +187,7 @@ class RerunRecorder(Recorder):
         self.model = model
         self.settings = dict(settings)
         self.geometry_every = max(int(geometry_every), 1)
-        live = str(target) in ("spawn", "connect") or str(target).startswith(_CONNECT_SCHEMES)
+        live = str(target) in ("spawn", "connect") or str(target).startswith(VIEWER_SCHEMES)
         self.batch = max(int(batch if batch is not None else (100 if live else 5000)), 1)
         self.batch_seconds = float(
             batch_seconds if batch_seconds is not None else (0.2 if live else 1.0)
@@ -216,7 +215,7 @@ class RerunRecorder(Recorder):
             self.rec.spawn(default_blueprint=blueprint)
         elif t == "connect":
             self.rec.connect_grpc(default_blueprint=blueprint)
-        elif t.startswith(_CONNECT_SCHEMES):
+        elif t.startswith(VIEWER_SCHEMES):
             self.rec.connect_grpc(t, default_blueprint=blueprint)
         else:
             self.rec.save(t, default_blueprint=blueprint)
@@ -226,63 +225,36 @@ class RerunRecorder(Recorder):
         log, model = self.rec.log, self.model
         self.rec.send_recording_name(model.name)
         run = {"scene": model.name, **self.settings, "package_versions": package_versions()}
-        log(
-            "run/settings",
-            rr.TextDocument(json.dumps(run, indent=2, default=str), media_type="text/plain"),
-            static=True,
-        )
-        log("run/scene", rr.TextDocument(scene_text, media_type="text/plain"), static=True)
-        if self.flip_y:
-            log(ROOT, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])), static=True)
-        colors = _LINK_COLORS[model.chain_of % len(_LINK_COLORS)]
-        log(f"{ROOT}/links", rr.LineStrips2D.from_fields(colors=colors, radii=0.008), static=True)
-        log(
-            f"{ROOT}/joints", rr.Points2D.from_fields(colors=[40, 40, 40], radii=0.015), static=True
-        )
-        names = [p.name for p in model.points]
-        log(
-            f"{ROOT}/points",
-            rr.Points2D.from_fields(labels=names, colors=[0, 0, 0], radii=0.012),
-            static=True,
-        )
-        log(
-            f"{ROOT}/traces",
-            rr.Points2D.from_fields(colors=[120, 120, 120], radii=0.003),
-            static=True,
-        )
-        log(
-            f"{ROOT}/cyclograph",
-            rr.LineStrips2D.from_fields(colors=[170, 170, 200, 90], radii=0.002),
-            static=True,
-        )
-        log(
-            f"{ROOT}/forces",
-            rr.Arrows2D.from_fields(labels=model.force_names, colors=[220, 40, 30], radii=0.006),
-            static=True,
-        )
+        settings = json.dumps(run, indent=2, default=str)
         ground = [c.origin for c in model.chains]
         ground += [
             c.target.local for c in model.closures if c.target.link == GROUND and c.kind != ANGLE
         ]
-        log(
-            f"{ROOT}/ground",
-            rr.Points2D(
-                np.array(ground, dtype=float).reshape(-1, 2), colors=[0, 0, 0], radii=0.025
-            ),
-            static=True,
-        )
-        series_names = {
-            "position": model.joint_names,
-            "velocity": model.joint_names,
-            "forces": self._force_names,
-            "energy": list(messages.ENERGY_LABELS),
-            "error": model.closure_names,
-        }
-        for key, labels in series_names.items():
-            log(SERIES[key], rr.SeriesLines(names=labels), static=True)
-        if self.measured:
-            for entity in MEASURED:
-                log(entity, rr.SeriesLines(names=model.joint_names), static=True)
+        colors = _LINK_COLORS[model.chain_of % len(_LINK_COLORS)]
+        static = [
+            ("run/settings", rr.TextDocument(settings, media_type="text/plain")),
+            ("run/scene", rr.TextDocument(scene_text, media_type="text/plain")),
+            *([(ROOT, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])))] if self.flip_y else []),
+            (f"{ROOT}/links", rr.LineStrips2D.from_fields(colors=colors, radii=0.008)),
+            (f"{ROOT}/joints", rr.Points2D.from_fields(colors=[40, 40, 40], radii=0.015)),
+            (f"{ROOT}/points", rr.Points2D.from_fields(labels=[p.name for p in model.points],
+                                                       colors=[0, 0, 0], radii=0.012)),
+            (f"{ROOT}/traces", rr.Points2D.from_fields(colors=[120, 120, 120], radii=0.003)),
+            (f"{ROOT}/cyclograph",
+             rr.LineStrips2D.from_fields(colors=[170, 170, 200, 90], radii=0.002)),
+            (f"{ROOT}/forces", rr.Arrows2D.from_fields(labels=model.force_names,
+                                                       colors=[220, 40, 30], radii=0.006)),
+            (f"{ROOT}/ground", rr.Points2D(np.array(ground, dtype=float).reshape(-1, 2),
+                                           colors=[0, 0, 0], radii=0.025)),
+        ]
+        series = {"position": model.joint_names, "velocity": model.joint_names,
+                  "forces": self._force_names, "energy": list(messages.ENERGY_LABELS),
+                  "error": model.closure_names}
+        static += [(SERIES[key], rr.SeriesLines(names=labels)) for key, labels in series.items()]
+        static += [(entity, rr.SeriesLines(names=model.joint_names))
+                   for entity in (MEASURED if self.measured else ())]
+        for entity, archetype in static:
+            log(entity, archetype, static=True)
 
     def _allocate(self) -> None:
         b, n, k = self.batch, self.model.n, len(self.model.closures)
