@@ -1,8 +1,9 @@
 """Compile every entry point of the kernels into numba's cache now: ``python -m vjm_ros.app.precompile``.
 
 What ``scripts/setup`` runs, and what an installer or a container image build can run, so that
-no later run starts on the plain-Python tier (:mod:`vjm_ros.jit.tiers`): the kernel and the
-block pipeline (:func:`vjm_ros.core.kernels.step`, :func:`vjm_ros.core.pipeline.advance_ticks`)
+no later run starts on the plain-Python tier (:mod:`vjm_ros.jit.tiers`): the kernel, the
+block pipeline and the observation of one state (:func:`vjm_ros.core.kernels.step`,
+:func:`vjm_ros.core.pipeline.advance_ticks`, :func:`~vjm_ros.core.pipeline.observe_state`)
 and their copies with the hub solves (mechanisms with four chains or more on one pin), the CSV
 writer, and the controllers' compiled model. Compiled in this process (``VJM_TIERED=0``), one
 after the other: 1-2 minutes on a 2-core machine, seconds when the cache holds them already.
@@ -48,6 +49,7 @@ def _compile_all(log, start: float) -> None:
     sim = Simulator(star.model, SimulationSettings(closure="exact"), star.gains)
     sim.blocks_compiled()
     sim.advance_block(SampleBlock(star.model, 2), 2)
+    sim.sample()
     log(f"... with the hub solves: {time.perf_counter() - start:.1f} s")
     with contextlib.redirect_stdout(io.StringIO()):  # the controllers' compiled algebra
         main(["model", "five_bar"])

@@ -102,6 +102,9 @@ class Mechanism:
         self._advance_ticks = tiers.entry(
             pipeline, "advance_ticks_with_hub" if hub else "advance_ticks",
             plain_calls=PIPELINE_PLAIN_CALLS)
+        self._observe_state = tiers.entry(
+            pipeline, "observe_state_with_hub" if hub else "observe_state",
+            plain_calls=STEP_PLAIN_CALLS)
         self._tick_state = pipeline.tick_state(n)
         self._rows = r
         self.model = model
@@ -225,7 +228,7 @@ class Mechanism:
         """Whether an entry point of the kernels runs as plain Python while numba compiles it in
         the background (a first run on a machine, :mod:`vjm_ros.jit.tiers`)."""
         return any(isinstance(e, tiers.Tiered) and e.tier == "plain"
-                   for e in (self._step, self._advance_ticks))
+                   for e in (self._step, self._advance_ticks, self._observe_state))
 
     @property
     def joint_loss(self) -> float:
@@ -324,6 +327,27 @@ class Mechanism:
         data.kin[self.n, layout.K_PCOS : layout.K_SLIDE + 1] = 0.0
         dyn, closure = unpack(data, self.n)
         return Evaluation(qdd, dyn, closure, data.crow[:, layout.R_FORCE], energy)
+
+    def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, lengths: np.ndarray,
+                plink: np.ndarray, plocal: np.ndarray, out: tuple[np.ndarray, ...]) -> None:
+        """Every observable at one state into row 0 of ``out``, as a block's ticks are observed
+        (:func:`vjm_ros.core.pipeline.observe_state`, one evaluation).
+
+        Parameters
+        ----------
+        q, qd, tau : ndarray, shape (n,)
+        lengths, plink, plocal, out
+            As :meth:`advance_observed` takes them; ``out`` needs one row.
+        """
+        self.evaluations += 1
+        observe = self._observe_state
+        status = observe(as_vector(q), as_vector(qd), as_vector(tau),
+                         layout.as_arguments(self._packed),
+                         layout.as_arguments(self._fresh_outputs()), lengths, plink, plocal, out)
+        if type(observe) is tiers.Tiered and observe.ready:
+            self._observe_state = observe.compiled
+        if status:
+            raise np.linalg.LinAlgError("Singular matrix")
 
     def energies(self, ev: Evaluation, qd: np.ndarray) -> np.ndarray:
         """Kinetic, potential, constraint and total energy, J.

@@ -295,6 +295,20 @@ def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, mode
 observe_with_hub = _variant(observe, "observe_with_hub", _step=K.step_with_hub)
 """:func:`observe` on :data:`vjm_ros.core.kernels.step_with_hub`."""
 
+
+@_jit(allocates=False)
+def observe_state(q, qd, tau, model, data, lengths, plink, plocal, out):
+    """Every observable at ``(q, qd)`` with efforts ``tau``, evaluated there, into row 0 of
+    ``out``: one sample outside a block (:meth:`vjm_ros.sim.simulator.Simulator.sample`), the
+    same numbers as :func:`advance_ticks` observes. Arguments as :func:`observe`; returns 0, or
+    1 when the mass matrix was exactly singular."""
+    return observe(0, q, qd, tau, model, data, lengths, plink, plocal, out, False)
+
+
+observe_state_with_hub = _variant(observe_state, "observe_state_with_hub",
+                                  observe=observe_with_hub)
+""":func:`observe_state` on :data:`vjm_ros.core.kernels.step_with_hub`."""
+
 advance_ticks_with_hub = _variant(advance_ticks, "advance_ticks_with_hub",
                                   _step=K.step_with_hub, _tick_step=K.step_with_hub_inline,
                                   observe=observe_with_hub)

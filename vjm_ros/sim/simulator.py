@@ -11,8 +11,8 @@ import numpy as np
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.errors import ConfigurationError, DivergenceError
 from vjm_ros.core.integrators import INTEGRATORS, AdaptiveIntegrator, make_integrator
-from vjm_ros.core.kinematics import link_segments, point_positions
 from vjm_ros.core.model import Load, Model
+from vjm_ros.core.pipeline import new_outputs
 from vjm_ros.scene.plant import Plant
 from vjm_ros.sim.actuators import Actuation
 from vjm_ros.sim.history import StateHistory
@@ -25,16 +25,6 @@ from vjm_ros.sim.stiffness import (
     closure_modes,
     mobility_at,
 )
-
-
-def _sum_in_order(values: np.ndarray) -> float:
-    """``values[0] + values[1] + ...`` from the left, as the compiled observation sums (neither
-    numpy's pairwise sum nor BLAS's dot keeps that order)."""
-    total = 0.0
-    for v in values.tolist():
-        total += v
-    return total
-
 
 HISTORY_STATES = 32
 """States kept before the latest ticks, judged when a run diverges (:meth:`Simulator._likely_cause`)."""
@@ -102,6 +92,7 @@ class Simulator:
         self._pipeline_ready = False
         self._point_links = np.array([p.ref.link for p in model.points], dtype=int)
         self._point_local = np.array([p.ref.local for p in model.points], dtype=float).reshape(-1, 2)
+        self._observed = new_outputs(1, model)  # sample()'s row of observables
         self.method = closure_method(model, self.settings, self.scene_gains,
                                      self._initial_mobility)
         from vjm_ros.core.compiled import make_mechanism  # numba is imported only here
@@ -483,58 +474,30 @@ class Simulator:
         -------
         Sample
         """
-        mech = self.mechanism
-        ev = mech.evaluate(self.q, self.qd, self.tau)
-        kin = ev.dyn.kin
-        model = self.model
-        points = segments = None
-        if geometry:
-            points = (point_positions(kin, self._point_links, self._point_local)
-                      if model.points else np.zeros((0, 2)))
-            segments = link_segments(model, kin)
-        energy = mech.energies(ev, self.qd)
-        # sum Kv Cdot^2: the power drawn by the penalty dampers (summed as pipeline.observe sums
-        # it, in order: numpy's pairwise sums differ in the last bit from 8 rows on)
-        dissipation = (_sum_in_order(mech.method.kv * ev.closure.rate**2) if mech.is_penalty
-                       else 0.0)
-        if model.has_plant_terms:  # joint damping and smooth friction, after the closures
-            scale = np.where(model.friction_scale > 0, model.friction_scale, 1.0)
-            smooth = np.where(model.friction_scale > 0,
-                              model.friction * np.tanh(self.qd / scale) * self.qd, 0.0)
-            terms = np.column_stack((model.damping * self.qd**2, smooth)).reshape(-1)
-            terms = terms[np.column_stack((np.ones(model.n, bool),
-                                           model.friction_scale > 0)).reshape(-1)]
-            dissipation = _sum_in_order(np.concatenate(([dissipation], terms)))
-        force = mech.closures.closure_forces(ev.closure, ev.row_force)
-        force_points = ev.closure.points
-        if len(model.stop_joints):  # then each stop's, as pipeline.observe_stops writes it
-            stops = model.stop_joints
-            effort = mech.stop_efforts[stops]
-            stop_force = np.zeros((len(stops), 3))
-            revolute = model.is_revolute[stops]
-            stop_force[revolute, 2] = effort[revolute]
-            stop_force[~revolute, :2] = kin.n_pred[stops][~revolute] * effort[~revolute, None]
-            force = np.concatenate((force, stop_force))
-            force_points = np.concatenate((force_points, kin.origin[stops]))
+        out = self._observed  # one row of the block pipeline's observables
+        self.mechanism.observe(self.q, self.qd, self.tau, self.model.length, self._point_links,
+                               self._point_local, out)
+        _, _, qdd, theta, points, force, error, cpoints, energy, power, dissipation, loss, \
+            segments = (a[0] for a in out)
         sigma = np.nan
-        if singular_values and model.n_rows:
-            sigma = float(np.linalg.svd(ev.closure.jacobian, compute_uv=False).min())
+        if singular_values and self.model.n_rows:
+            sigma = self.smallest_singular_value()
         return Sample(
             t=self.t,
             q=self.q.copy(),
             qd=self.qd.copy(),
-            qdd=ev.qdd,
+            qdd=qdd.copy(),
             effort=self.tau.copy(),
-            theta=kin.theta[: model.n].copy(),
-            points=points,
-            closure_force=force,
-            closure_error=mech.closures.errors(ev.closure),
-            closure_points=force_points,
-            energy=energy,
-            power_in=_sum_in_order(self.tau * self.qd),
-            dissipation=dissipation,
-            joint_loss=mech.joint_loss if model.has_joint_efforts else 0.0,
-            segments=segments,
+            theta=theta.copy(),
+            points=points.copy() if geometry else None,
+            closure_force=force.copy(),
+            closure_error=error.copy(),
+            closure_points=cpoints.copy(),
+            energy=energy.copy(),
+            power_in=float(power),
+            dissipation=float(dissipation),
+            joint_loss=float(loss),
+            segments=segments.copy() if geometry else None,
             sigma_min=sigma,
             measured=None if self.measured is None else self.measured.copy(),
         )
