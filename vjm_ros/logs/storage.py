@@ -98,13 +98,8 @@ class LogWriters:
         self.failed: list[tuple[str, str]] = []
         self._on_failure = on_failure
 
-    def write(self, sample) -> None:
-        """Write ``sample`` to every working recorder."""
-        for rec in list(self.active):
-            self.write_to(rec, sample)
-
     def write_to(self, rec, sample) -> None:
-        """:meth:`write` for one recorder (nothing if it was given up)."""
+        """Write ``sample`` to one recorder (nothing if it was given up)."""
         if rec not in self.active:
             return
         try:
@@ -141,10 +136,13 @@ class LogWriters:
             except OSError as exc:
                 self._give_up(rec, exc)
 
-    def _give_up(self, rec, exc: OSError) -> None:
+    def _give_up(self, rec, exc: OSError, close: bool = True) -> None:
+        """Stop writing to ``rec`` after ``exc``, closing it unless ``exc`` came from its close;
+        report it as a failed log."""
         self.active.remove(rec)
         try:
-            rec.close()
+            if close:
+                rec.close()
         except (OSError, ValueError):
             pass  # what reached the disk stays; an MCAP's complete chunks can be recovered
         text = exc.strerror or str(exc)
@@ -164,10 +162,7 @@ class LogWriters:
         try:
             rec.close()
         except OSError as exc:
-            self.active.remove(rec)
-            text = exc.strerror or str(exc)
-            self.failed.append((_where(rec), text))
-            self._on_failure(_where(rec), text)
+            self._give_up(rec, exc, close=False)
 
 
 def _where(rec) -> str:
