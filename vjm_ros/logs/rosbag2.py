@@ -201,11 +201,7 @@ class BagInfo:
 
     def note(self, topic: TopicRecord, ns: int) -> None:
         """Count one message of ``topic`` logged at ``ns``."""
-        topic.count += 1
-        if self.start_ns is None or ns < self.start_ns:
-            self.start_ns = ns
-        if self.end_ns is None or ns > self.end_ns:
-            self.end_ns = ns
+        self.note_many(topic, 1, ns, ns)
 
     def note_many(self, topic: TopicRecord, count: int, first_ns: int, last_ns: int) -> None:
         """Count ``count`` messages of ``topic`` logged from ``first_ns`` to ``last_ns``."""
