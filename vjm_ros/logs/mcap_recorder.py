@@ -76,6 +76,8 @@ _COMPRESSION = {
     "lz4": CompressionType.LZ4,
     "none": CompressionType.NONE,
 }
+CHUNK_BYTES = 1 << 20
+"""Largest uncompressed chunk, bytes."""
 INDEXES = IndexType.ALL
 """Indexes written: chunk, message, attachment and metadata indexes, as rosbag2 writes them.
 Readers that read in time order or by topic (rosbags, rosbag2, Foxglove) need the message
@@ -103,23 +105,17 @@ class McapRecorder(Recorder):
         The simulated model (joint and closure names).
     settings : dict
         Run settings, e.g. ``Simulator.describe()``; stored as metadata. ``dt`` (s) or ``rate``
-        (Hz) sets the gap left between episodes after a reset.
+        (Hz) sets the gap left between episodes after a reset; the private topics are
+        ``<namespace>/<node>/...`` with ``settings["node"]`` (else ``vjm_sim_node``) and
+        ``settings["namespace"]`` (else the root).
     scene_text : str
         Scene YAML, stored as the attachment ``scene.yaml`` (``model.source_text`` when empty).
-    node_name : str, optional
-        Node name of the private topics ``<namespace>/<node_name>/...``: ``settings["node"]``
-        when given, else ``vjm_sim_node``; the namespace is ``settings["namespace"]`` (root when
-        absent).
     marker_every : int
         Write ``/<node>/markers`` on every ``marker_every``-th sample (and the first); 0 disables.
     chunk_seconds : float
         Longest span of simulated or wall time, s, that a chunk collects before it is written.
-    chunk_bytes : int
-        Largest uncompressed chunk, bytes.
     compression : str
         ``"zstd"``, ``"lz4"`` or ``"none"``.
-    force_scale : float
-        Length of the constraint-force arrows in the markers, m/N.
 
     Attributes
     ----------
@@ -136,12 +132,9 @@ class McapRecorder(Recorder):
         model: Model,
         settings: dict,
         scene_text: str = "",
-        node_name: str | None = None,
         marker_every: int = 10,
         chunk_seconds: float = 0.25,
-        chunk_bytes: int = 1 << 20,
         compression: str = "zstd",
-        force_scale: float = 0.01,
     ):
         if compression not in _COMPRESSION:
             raise ValueError(
@@ -149,10 +142,9 @@ class McapRecorder(Recorder):
             )
         self.path = Path(path)
         self.model = model
-        node_name = node_name or str(settings.get("node", "vjm_sim_node"))
+        node_name = str(settings.get("node", "vjm_sim_node"))
         self.topics = messages.Topics(node_name, str(settings.get("namespace", "")))
         self.marker_every = int(marker_every)
-        self.force_scale = float(force_scale)
         self.chunk_ns = int(chunk_seconds * 1e9)
         self.chunk_seconds = float(chunk_seconds)
         self.timebase = Timebase(tick_of(settings))
@@ -168,7 +160,7 @@ class McapRecorder(Recorder):
         self._file = open(self.path, "wb")  # closed in close()
         try:
             self._writer = mcap_block.BlockWriter(
-                self._file, chunk_size=int(chunk_bytes), compression=_COMPRESSION[compression],
+                self._file, chunk_size=CHUNK_BYTES, compression=_COMPRESSION[compression],
                 index_types=INDEXES,
             )
             self._writer.start(profile=Profile.ROS2, library=self._library())
@@ -207,7 +199,7 @@ class McapRecorder(Recorder):
         self._ch_clock = self._channels[t.clock]
         self._ch_wrench = [self._channels[t.wrench(name)] for name in self._force_names]
         self._block_encoder = mcap_block.BlockEncoder(
-            self.model, self._channels, t, self.marker_every, self.force_scale, self.measured)
+            self.model, self._channels, t, self.marker_every, messages.FORCE_SCALE, self.measured)
 
     @staticmethod
     def _library() -> str:
@@ -281,7 +273,7 @@ class McapRecorder(Recorder):
         put(self._ch_energy, self._enc_energy(sample.energy.tolist()), ns)
         put(self._ch_clock, cdr.encode_clock(ns), ns)
         if self.marker_every > 0 and self.samples % self.marker_every == 0:
-            markers = messages.markers(sample, ns, self.force_scale)
+            markers = messages.markers(sample, ns)
             self._put(self._channels[self.topics.markers], cdr.encode_markers(markers), ns)
         self.samples += 1
         self._maybe_flush(ns)

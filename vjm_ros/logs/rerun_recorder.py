@@ -11,10 +11,10 @@ entity                         archetype      content
 ``mechanism/points``           Points2D       named points (chain tips), labelled, m
 ``mechanism/forces``           Arrows2D       constraint force of each closure at its point,
                                               then of each stop at its joint, times
-                                              ``force_scale`` m/N, labelled
+                                              ``messages.FORCE_SCALE`` m/N, labelled
 ``mechanism/traces``           Points2D       named points again, shown over all past time:
                                               the tip paths
-``mechanism/cyclograph``       LineStrips2D   links every ``cyclograph_period`` s, shown over
+``mechanism/cyclograph``       LineStrips2D   links every :data:`CYCLOGRAPH_PERIOD`, shown over
                                               all past time: the chrono-cyclograph
 ``series/joints/position``     Scalars        one series per joint, rad or m
 ``series/joints/velocity``     Scalars        rad/s or m/s
@@ -71,6 +71,8 @@ SERIES = {
 }
 MEASURED = ("series/measured/position", "series/measured/velocity", "series/measured/effort")
 """Entities of the sensors' measurements (a scene with sensors), position, velocity, effort."""
+CYCLOGRAPH_PERIOD = 0.1
+"""Simulated time between two poses of the chrono-cyclograph, s."""
 _LINK_COLORS = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75]],
     dtype=np.uint8,
@@ -153,17 +155,10 @@ class RerunRecorder(Recorder):
     batch_seconds : float, optional
         ... or when this much wall time has passed since the last send, s (0.2 for a viewer, 1
         for a file).
-    force_scale : float
-        Arrow length per newton (per N m for angle closures), m/N.
-    cyclograph_period : float
-        Simulated time between two poses of the chrono-cyclograph, s; 0 disables it.
     scene_text : str
         Scene YAML for ``run/scene`` (``model.source_text`` when empty).
-    application_id : str
     recording_id : str, optional
         A fresh UUID when omitted.
-    flip_y : bool
-        Log the y-flipping transform on ``mechanism`` (see module notes).
 
     A scene with sensors (``settings["sensors"]``) also logs the measured joint states
     (:data:`MEASURED`) from the samples' ``measured``.
@@ -177,12 +172,8 @@ class RerunRecorder(Recorder):
         geometry_every: int = 10,
         batch: int | None = None,
         batch_seconds: float | None = None,
-        force_scale: float = 0.01,
-        cyclograph_period: float = 0.1,
         scene_text: str = "",
-        application_id: str = "vjm_ros",
         recording_id: str | None = None,
-        flip_y: bool = True,
     ):
         self.model = model
         self.settings = dict(settings)
@@ -192,16 +183,14 @@ class RerunRecorder(Recorder):
         self.batch_seconds = float(
             batch_seconds if batch_seconds is not None else (0.2 if live else 1.0)
         )
-        self.force_scale = float(force_scale)
-        self.cyclograph_ns = int(cyclograph_period * 1e9)
-        self.flip_y = bool(flip_y)
+        self.cyclograph_ns = int(CYCLOGRAPH_PERIOD * 1e9)
         self.timebase = Timebase(tick_of(settings))
         self.samples = 0
         self._closed = False
         self.measured = bool(settings.get("sensors"))
         self._force_rows, self._force_cols, self._force_names = force_components(model)
         self._is_angle = np.array(model.force_is_moment, dtype=bool)
-        self.rec = rr.RecordingStream(application_id, recording_id=recording_id or uuid.uuid4())
+        self.rec = rr.RecordingStream("vjm_ros", recording_id=recording_id or uuid.uuid4())
         self._connect(target, default_blueprint(model, self.measured))
         self._log_static(scene_text or model.source_text)
         self._allocate()
@@ -234,7 +223,7 @@ class RerunRecorder(Recorder):
         static = [
             ("run/settings", rr.TextDocument(settings, media_type="text/plain")),
             ("run/scene", rr.TextDocument(scene_text, media_type="text/plain")),
-            *([(ROOT, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0])))] if self.flip_y else []),
+            (ROOT, rr.Transform3D(mat3x3=np.diag([1.0, -1.0, 1.0]))),
             (f"{ROOT}/links", rr.LineStrips2D.from_fields(colors=colors, radii=0.008)),
             (f"{ROOT}/joints", rr.Points2D.from_fields(colors=[40, 40, 40], radii=0.015)),
             (f"{ROOT}/points", rr.Points2D.from_fields(labels=[p.name for p in model.points],
@@ -288,7 +277,7 @@ class RerunRecorder(Recorder):
         if self.samples % self.geometry_every == 0:
             self._geo.append((np.array([ns]), sample.segments[None], sample.points[None],
                               sample.closure_points[None], sample.closure_force[None]))
-            if self.cyclograph_ns > 0 and ns >= self._next_cyclograph_ns:
+            if ns >= self._next_cyclograph_ns:
                 self._cyc.append((np.array([ns]), sample.segments[None]))
                 self._next_cyclograph_ns = ns + self.cyclograph_ns
         self.samples += 1
@@ -339,8 +328,6 @@ class RerunRecorder(Recorder):
         times, segments = ns[kept], block.segments[kept]  # fancy indexing copies
         self._geo.append((times, segments, block.points[kept], block.cpoints[kept],
                           block.force[kept]))
-        if self.cyclograph_ns <= 0:
-            return
         poses, at = [], int(np.searchsorted(times, self._next_cyclograph_ns))
         while at < len(times):  # the first kept time at least a period after the last pose
             poses.append(at)
@@ -402,11 +389,11 @@ class RerunRecorder(Recorder):
             send(f"{ROOT}/cyclograph", cidx, cols)
 
     def _arrow_vectors(self, forces: np.ndarray) -> np.ndarray:
-        """Arrow vectors, m: ``force_scale * (fx, fy)``; a moment ``mz`` is drawn along +y."""
+        """Arrow vectors, m: ``messages.FORCE_SCALE * (fx, fy)``; a moment ``mz`` is drawn along +y."""
         vec = forces[:, :2].copy()
         moment = np.tile(self._is_angle, len(forces) // len(self._is_angle))
         vec[moment, 1] = forces[moment, 2]
-        return self.force_scale * vec
+        return messages.FORCE_SCALE * vec
 
     @atomic
     def note(self, text: str, level: str = "INFO", t: float | None = None) -> None:
