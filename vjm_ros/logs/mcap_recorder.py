@@ -372,15 +372,10 @@ class McapRecorder(Recorder):
         self._chunk_wall = time.monotonic()
 
     # ------------------------------------------------------------------ closing
-    def bag_metadata(self, file_name: str | None = None) -> dict:
-        """The bag's ``metadata.yaml`` document (:mod:`vjm_ros.logs.rosbag2`) so far.
-
-        Parameters
-        ----------
-        file_name : str, optional
-            Name of the ``.mcap`` file in the bag directory (this file's name by default).
-        """
-        return self.bag.metadata(file_name or self.path.name)
+    def bag_metadata(self) -> dict:
+        """The bag's ``metadata.yaml`` document (:mod:`vjm_ros.logs.rosbag2`) so far, naming
+        this file."""
+        return self.bag.metadata(self.path.name)
 
     def _finalize(self) -> None:
         """Write the bag's metadata, the summary (Statistics, indexes) and close the file."""

@@ -290,10 +290,7 @@ FORCE_SCALE = 0.01
 
 
 def marker_specs(
-    sample,
-    force_scale: float = FORCE_SCALE,
-    line_width: float = LINE_WIDTH,
-    trace: Sequence[np.ndarray] = (),
+    sample, force_scale: float = FORCE_SCALE, trace: Sequence[np.ndarray] = ()
 ) -> list[tuple]:
     """What the mechanism's markers draw, once for the logs and the node.
 
@@ -301,7 +298,7 @@ def marker_specs(
     ``SPHERE_LIST``: link origins and named points such as chain tips), ``constraint_forces``
     (ids 0..k-1, one ``ARROW`` per closure from its point along ``force_scale * (fx, fy)``) and,
     when ``trace`` is given, ``tip_trace`` (one ``LINE_STRIP`` per chain tip with two or more
-    positions).
+    positions). Links are drawn :data:`LINE_WIDTH` wide.
 
     Parameters
     ----------
@@ -310,8 +307,6 @@ def marker_specs(
         ``closure_force`` (k, 3).
     force_scale : float
         Arrow length per newton, m/N.
-    line_width : float
-        Link line width, m.
     trace : sequence of ndarray, shape (m, 2)
         Recent positions of each chain tip, m.
 
@@ -320,7 +315,7 @@ def marker_specs(
     list of tuple
         ``(namespace, id, kind, points (m, 2) in m, scale (3,) in m, rgba (4,))`` per marker.
     """
-    w = line_width
+    w = LINE_WIDTH
     segments = np.asarray(sample.segments)
     joints = np.vstack((segments[:, 0, :], np.asarray(sample.points).reshape(-1, 2)))
     specs = [
@@ -341,17 +336,17 @@ def marker_specs(
     return specs
 
 
-def markers(sample, ns: int, force_scale: float = FORCE_SCALE, line_width: float = LINE_WIDTH,
+def markers(sample, ns: int, force_scale: float = FORCE_SCALE,
             trace: Sequence[np.ndarray] = ()) -> dict:
     """``visualization_msgs/MarkerArray`` drawing the mechanism (:func:`marker_specs`).
 
     Parameters
     ----------
-    sample, force_scale, line_width, trace
+    sample, force_scale, trace
         As for :func:`marker_specs` (``trace``: the node's ``tip_trace`` markers).
     ns : int
         Header stamp, ns.
     """
-    specs = marker_specs(sample, force_scale, line_width, trace)
+    specs = marker_specs(sample, force_scale, trace)
     return {"markers": [marker(ns, namespace, marker_id, kind, points, scale, _rgba(*rgba))
                         for namespace, marker_id, kind, points, scale, rgba in specs]}

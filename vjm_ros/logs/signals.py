@@ -122,8 +122,9 @@ def _exit_now_or_after_the_write(signum: int) -> None:
 
 
 @contextmanager
-def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[None]:
-    """Turn termination signals into :class:`SystemExit` while the block runs.
+def finalize_on_signals() -> Iterator[None]:
+    """Turn termination signals (:data:`DEFAULT_SIGNALS`: SIGTERM and SIGHUP) into
+    :class:`SystemExit` while the block runs.
 
     A process stopped with SIGTERM (``kill``, ``timeout``, a launch system) then unwinds normally,
     so the ``close()`` of every recorder opened in or around the block runs and the logs are
@@ -131,12 +132,7 @@ def finalize_on_signals(signals: tuple[int, ...] = DEFAULT_SIGNALS) -> Iterator[
     (:func:`atomic`). The exit status is ``128 + signal number``, as for a default kill. Further
     signals of the set are ignored while unwinding, so a second SIGTERM cannot cut finalization
     short (SIGKILL still can). The previous handlers come back when the block ends. SIGINT is left
-    alone by default: Python already raises :class:`KeyboardInterrupt` for it.
-
-    Parameters
-    ----------
-    signals : tuple of int
-        Signals to convert; SIGTERM and SIGHUP by default.
+    alone: Python already raises :class:`KeyboardInterrupt` for it.
     """
-    with StopSignals(signals, on_stop=_exit_now_or_after_the_write):
+    with StopSignals(DEFAULT_SIGNALS, on_stop=_exit_now_or_after_the_write):
         yield
