@@ -104,29 +104,19 @@ def force_components(model: Model) -> tuple[np.ndarray, np.ndarray, list[str]]:
 def default_blueprint(model: Model, measured: bool = False) -> rrb.Blueprint:
     """Mechanism view on the left, one plot per series group on the right (and one of the
     sensors' measurements when ``measured``)."""
-    infinite = rrb.VisibleTimeRanges(
-        timeline=TIMELINE,
-        start=rrb.TimeRangeBoundary.infinite(),
-        end=rrb.TimeRangeBoundary.cursor_relative(),
-    )
+    infinite = rrb.VisibleTimeRanges(timeline=TIMELINE, start=rrb.TimeRangeBoundary.infinite(),
+                                     end=rrb.TimeRangeBoundary.cursor_relative())
     mechanism = rrb.Spatial2DView(
-        name=f"{model.name}: mechanism",
-        origin="/",
-        contents=f"+ /{ROOT}/**",
-        overrides={f"/{ROOT}/traces": infinite, f"/{ROOT}/cyclograph": infinite},
-    )
-    plots = [
-        rrb.TimeSeriesView(name="Joint positions (rad, m)", origin=f"/{SERIES['position']}"),
-        rrb.TimeSeriesView(name="Joint velocities (rad/s, m/s)", origin=f"/{SERIES['velocity']}"),
-        rrb.TimeSeriesView(name="Constraint forces (N, N m)", origin=f"/{SERIES['forces']}"),
-        rrb.TimeSeriesView(name="Energy (J)", origin=f"/{SERIES['energy']}"),
-        rrb.TimeSeriesView(name="Closure error (m, rad)", origin=f"/{SERIES['error']}"),
-    ]
+        name=f"{model.name}: mechanism", origin="/", contents=f"+ /{ROOT}/**",
+        overrides={f"/{ROOT}/traces": infinite, f"/{ROOT}/cyclograph": infinite})
+    plots = [rrb.TimeSeriesView(name=name, origin=f"/{SERIES[key]}") for key, name in (
+        ("position", "Joint positions (rad, m)"), ("velocity", "Joint velocities (rad/s, m/s)"),
+        ("forces", "Constraint forces (N, N m)"), ("energy", "Energy (J)"),
+        ("error", "Closure error (m, rad)"))]
     if measured:
         plots.append(rrb.TimeSeriesView(name="Measured joint states", origin="/series/measured"))
-    left = rrb.Vertical(
-        mechanism, rrb.TextLogView(name="Events", origin="/events"), row_shares=[5, 1]
-    )
+    left = rrb.Vertical(mechanism, rrb.TextLogView(name="Events", origin="/events"),
+                        row_shares=[5, 1])
     return rrb.Blueprint(
         rrb.Horizontal(left, rrb.Vertical(*plots), column_shares=[3, 2]),
         rrb.TimePanel(timeline=TIMELINE),
