@@ -163,12 +163,16 @@ def encode_markers(message: dict) -> bytes:
     140-155 us for the four-bar's markers, measured here in one run), and checked against rosbags byte
     for byte in test/test_cdr_rosbags.py.
     """
+    return _marker_array(message).getvalue()
+
+
+def _marker_array(message: dict, marks: list[int] | None = None) -> CdrWriter:
+    """A ``MarkerArray`` written; with ``marks``, the offsets of :func:`_marker`."""
     w = CdrWriter()
-    markers = message["markers"]
-    w.uint32(len(markers))
-    for marker in markers:
-        _marker(w, marker)
-    return w.getvalue()
+    w.uint32(len(message["markers"]))
+    for marker in message["markers"]:
+        _marker(w, marker, marks)
+    return w
 
 
 # ---------------------------------------------------------------- fixed layouts
@@ -390,12 +394,8 @@ def markers_layout(message: dict) -> FixedLayout:
         its stamps and points become zeros in the template.
     """
     marks: list[int] = []
-    w = CdrWriter()
+    buf = bytearray(_marker_array(message, marks).getvalue())
     markers = message["markers"]
-    w.uint32(len(markers))
-    for marker in markers:
-        _marker(w, marker, marks)
-    buf = bytearray(w.getvalue())
     stamps, arrays = tuple(marks[0::2]), []
     for marker, stamp, start in zip(markers, stamps, marks[1::2], strict=True):
         count = 3 * len(marker["points"])
