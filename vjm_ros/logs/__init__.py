@@ -165,24 +165,23 @@ def tick_of(settings: dict) -> float:
     return 0.0
 
 
-def package_versions(
-    names: tuple[str, ...] = ("vjm_ros", "numpy", "scipy", "mcap", "rerun-sdk"),
-) -> dict:
-    """Installed versions of the packages that shape a log (``"not installed"`` when absent).
+def package_versions() -> dict:
+    """Installed versions of Python and of the packages that shape a log (``"not installed"``
+    when absent).
 
     Read once per process (each log of a run stores them; reading the package metadata takes
     milliseconds).
     """
-    return dict(_package_versions(tuple(names)))
+    return dict(_package_versions())
 
 
 @functools.cache
-def _package_versions(names: tuple[str, ...]) -> dict:
+def _package_versions() -> dict:
     import platform
     from importlib import metadata
 
     out = {"python": platform.python_version()}
-    for name in names:
+    for name in ("vjm_ros", "numpy", "scipy", "mcap", "rerun-sdk"):
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
