@@ -18,12 +18,10 @@ class RowSample:
 
     def __init__(self, block: SampleBlock):
         self.block = block
-        fields = dict(BLOCK_FIELDS)
-        self._power = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "power_in"))
-        self._dissipation = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "dissipation"))
-        self._loss = getattr(block, next(k for k, a in BLOCK_FIELDS if a == "joint_loss"))
-        views = {attr: getattr(block, key)[0] for key, attr in fields.items()
-                 if attr not in ("power_in", "dissipation", "joint_loss")}
+        key_of = {attr: key for key, attr in BLOCK_FIELDS}
+        scalars = ("power_in", "dissipation", "joint_loss")
+        self._power, self._dissipation, self._loss = (getattr(block, key_of[a]) for a in scalars)
+        views = {attr: getattr(block, key)[0] for key, attr in BLOCK_FIELDS if attr not in scalars}
         self.sample = Sample(t=0.0, effort=block.effort, power_in=0.0, dissipation=0.0,
                              joint_loss=0.0, **views)
 
