@@ -104,18 +104,12 @@ def write_figures(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     name = title if title is not None else traj.model.name
-    builders = {
-        "chrono_cyclograph": chrono_cyclograph_figure,
-        "displacements": displacements_figure,
-        "velocities": velocities_figure,
-        "accelerations": accelerations_figure,
-        "constraint_forces": constraint_forces_figure,
-        "energy": energy_figure,
-    }
+    builders = (chrono_cyclograph_figure, displacements_figure, velocities_figure,
+                accelerations_figure, constraint_forces_figure, energy_figure)
     paths = []
-    for stem in FIGURE_NAMES:
+    for stem, build in zip(FIGURE_NAMES, builders, strict=True):
         with np.errstate(invalid="ignore", over="ignore"):
-            fig = builders[stem](traj, name)
+            fig = build(traj, name)
         path = out / f"{stem}.png"
         fig.savefig(path, dpi=dpi)
         fig.clear()
