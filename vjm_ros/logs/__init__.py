@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from vjm_ros.logs import events
 from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
 
 if TYPE_CHECKING:
@@ -72,6 +73,14 @@ class Recorder:
     def _finalize(self) -> None:
         """Write what is pending and release the sink (called once by :meth:`close`)."""
         raise NotImplementedError
+
+    def _reset_event(self, t: float | None, tick: float | None) -> tuple[int, str]:
+        """Start a new episode of ``self.timebase`` (:meth:`Timebase.reset`); its start, ns,
+        and the reset event's text (:func:`~vjm_ros.logs.events.reset_line`)."""
+        ns = self.timebase.reset(t, tick)
+        ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
+        self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
+        return ns, events.reset_line(ended * 1e-9, ns * 1e-9)
 
     def close(self) -> None:
         """Finalize the log; later calls do nothing."""

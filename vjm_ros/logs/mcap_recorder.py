@@ -51,7 +51,6 @@ from vjm_ros.logs import (
     Timebase,
     atomic,
     cdr,
-    events,
     mcap_block,
     messages,
     msgdefs,
@@ -347,11 +346,8 @@ class McapRecorder(Recorder):
             The new episode's control period, s, when the reset changes it.
         """
         self._check_open()
-        ns = self.timebase.reset(t, tick)
-        ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
-        text = events.reset_line(ended * 1e-9, ns * 1e-9)
+        ns, text = self._reset_event(t, tick)
         self._event(text, ns)
-        self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
 
     def _maybe_flush(self, ns: int) -> None:
         if self._chunk_start_ns is None:

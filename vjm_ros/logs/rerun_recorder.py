@@ -53,7 +53,6 @@ from vjm_ros.logs import (
     Recorder,
     Timebase,
     atomic,
-    events,
     messages,
     package_versions,
     tick_of,
@@ -408,10 +407,7 @@ class RerunRecorder(Recorder):
         """Mark a simulator reset (see :meth:`vjm_ros.logs.McapRecorder.note_reset`)."""
         self._check_open()
         self.send()
-        ns = self.timebase.reset(t, tick)
-        ended = self.timebase.last_ns if self.timebase.last_ns is not None else ns
-        text = events.reset_line(ended * 1e-9, ns * 1e-9)
-        self.timebase.last_ns = max(self.timebase.last_ns or 0, ns)
+        ns, text = self._reset_event(t, tick)
         self._next_cyclograph_ns = ns
         self.rec.set_time(TIMELINE, duration=np.timedelta64(ns, "ns"))
         self.rec.log("events", rr.TextLog(text, level="INFO"))
