@@ -73,11 +73,16 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("scenes", help="list the built-in scenes")
 
     r = sub.add_parser("run", help="simulate a scene and write its trajectory and measures")
-    r.add_argument("scene", nargs="?", default=DEFAULT_SCENE,
-                   help=f"built-in scene name or YAML path (default: {DEFAULT_SCENE})")
+    r.add_argument(
+        "scene",
+        nargs="?",
+        default=DEFAULT_SCENE,
+        help=f"built-in scene name or YAML path (default: {DEFAULT_SCENE})",
+    )
     r.add_argument("--duration", type=float, help="simulated seconds (scene default, else 10)")
-    r.add_argument("--rate", type=float,
-                   help="control ticks per second, Hz (scene default, else 1000)")
+    r.add_argument(
+        "--rate", type=float, help="control ticks per second, Hz (scene default, else 1000)"
+    )
     r.add_argument("--substeps", type=int, help="fixed steps per tick (scene default, else 1)")
     r.add_argument("--integrator", choices=list(INTEGRATORS), help="time-stepping method")
     r.add_argument("--closure", choices=["penalty", "exact"], help="closure method")
@@ -90,20 +95,33 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--projection", action="store_true", help="exact: project q, qd each tick")
     r.add_argument("--rtol", type=float, default=1e-9, help="adaptive integrators' rtol")
     r.add_argument("--atol", type=float, default=1e-12, help="adaptive integrators' atol")
-    r.add_argument("--effort", type=float, nargs="+", metavar="E",
-                   help="constant actuator efforts in the scene's actuator order, N m or N")
-    r.add_argument("--kernel", metavar="{auto,numba}", default="auto",
-                   help="physics kernels: 'auto' (machine code with numba, plain Python without) "
-                   "or 'numba' (an error without numba) (default: auto)")
-    r.add_argument("--no-stiffness-check", action="store_true",
-                   help="run even if the penalty gains exceed the integrator's stability bound")
+    r.add_argument(
+        "--effort",
+        type=float,
+        nargs="+",
+        metavar="E",
+        help="constant actuator efforts in the scene's actuator order, N m or N",
+    )
+    r.add_argument(
+        "--kernel",
+        metavar="{auto,numba}",
+        default="auto",
+        help="physics kernels: 'auto' (machine code with numba, plain Python without) or "
+        "'numba' (an error without numba) (default: auto)",
+    )
+    r.add_argument(
+        "--no-stiffness-check",
+        action="store_true",
+        help="run even if the penalty gains exceed the integrator's stability bound",
+    )
     r.add_argument("--out", type=Path, help="directory for trajectory.csv and summary.json")
     r.add_argument("--mcap", type=Path, help="write a ROS 2 MCAP log")
     r.add_argument("--bag", type=Path, metavar="DIR",
                    help="write a rosbag2 directory (metadata.yaml and DIR_0.mcap)")
     r.add_argument("--rrd", help="write a rerun recording (.rrd path, 'spawn' or 'connect')")
-    r.add_argument("--plots", action="store_true",
-                   help="write the thesis figure set (PNG) to --out")
+    r.add_argument(
+        "--plots", action="store_true", help="write the thesis figure set (PNG) to --out"
+    )
     r.add_argument("--json", action="store_true", help="print the summary as JSON on the last line")
 
     for name, text in (("bench", "speed/accuracy study"),

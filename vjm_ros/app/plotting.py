@@ -193,8 +193,13 @@ def _draw_poses(ax, model, pose_segments: np.ndarray) -> tuple[list, list]:
         if not chain.links:
             continue
         lines = _chain_polylines(pose_segments, chain.links)
-        coll = LineCollection(list(lines), colors=cmap(0.15 + 0.85 * shade), linewidths=0.9,
-                              linestyles=style, zorder=2)
+        coll = LineCollection(
+            list(lines),
+            colors=cmap(0.15 + 0.85 * shade),
+            linewidths=0.9,
+            linestyles=style,
+            zorder=2,
+        )
         ax.add_collection(coll, autolim=True)
         last = lines[-1]
         ax.plot(last[:, 0], last[:, 1], "o", ms=3.0, color=cmap(1.0), zorder=3)
@@ -211,8 +216,16 @@ def _draw_traces(ax, model, points: np.ndarray, cmaps: list) -> list:
         idx = _envelope_index(xy, MAX_LINE_POINTS)
         c = tip_chain.get(point.name)
         color, ls = (cmaps[c](1.0), "-") if c is not None else ("0.35", "--")
-        handles += ax.plot(xy[idx, 0], xy[idx, 1], ls=ls, lw=1.3, color=color, zorder=4,
-                           label=f"{point.name} trace")
+        (line,) = ax.plot(
+            xy[idx, 0],
+            xy[idx, 1],
+            ls=ls,
+            lw=1.3,
+            color=color,
+            zorder=4,
+            label=f"{point.name} trace",
+        )
+        handles.append(line)
     return handles
 
 
@@ -317,8 +330,9 @@ def constraint_forces_figure(traj: Trajectory, name: str) -> Figure:
     fig.suptitle(f"{name}: constraint forces at the closure points")
     if not moment:
         ax = fig.add_subplot()
-        ax.text(0.5, 0.5, "no closures in this scene", ha="center", va="center",
-                transform=ax.transAxes)
+        ax.text(
+            0.5, 0.5, "no closures in this scene", ha="center", va="center", transform=ax.transAxes
+        )
         ax.set_xlabel("t (s)")
         ax.set_ylabel("force (N)")
         return fig
@@ -386,8 +400,9 @@ def _fill_panels(fig: Figure, t: np.ndarray, panels: Sequence[tuple[str, str, li
     _time_axes(axes, t)
 
 
-def _series(ax, t: np.ndarray, y: np.ndarray, *, color, ls: str, label: str,
-            lw: float = 1.2) -> None:
+def _series(
+    ax, t: np.ndarray, y: np.ndarray, *, color, ls: str, label: str, lw: float = 1.2
+) -> None:
     """Plot one time series, reduced to its per-bucket extremes when long."""
     idx = _envelope_index(y, MAX_LINE_POINTS)
     ax.plot(t[idx], y[idx], color=color, ls=ls, lw=lw, label=label)

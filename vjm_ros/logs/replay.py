@@ -231,15 +231,27 @@ class _Poser:
                 effort[i] = js.effort[j]
         dyn, terms = self.mech.terms(q, jacobian=False)  # one kernel call, no dynamics
         kin = dyn.kin
-        points = (point_positions(kin, self.point_links, self.point_local)
-                  if len(self.point_links) else np.zeros((0, 2)))
+        points = (
+            point_positions(kin, self.point_links, self.point_local)
+            if len(self.point_links)
+            else np.zeros((0, 2))
+        )
         return Sample(
-            t=ns * 1e-9, q=q, qd=qd, qdd=np.full(n, np.nan), effort=effort,
-            theta=kin.theta[:n].copy(), points=points, closure_force=forces,
+            t=ns * 1e-9,
+            q=q,
+            qd=qd,
+            qdd=np.full(n, np.nan),
+            effort=effort,
+            theta=kin.theta[:n].copy(),
+            points=points,
+            closure_force=forces,
             closure_error=self.mech.closures.errors(terms),
             closure_points=np.concatenate((terms.points, kin.origin[model.stop_joints])),
-            energy=energy, power_in=float(effort @ qd), dissipation=float("nan"),
-            joint_loss=float("nan"), segments=link_segments(model, kin),
+            energy=energy,
+            power_in=float(effort @ qd),
+            dissipation=float("nan"),
+            joint_loss=float("nan"),
+            segments=link_segments(model, kin),
         )
 
 
@@ -338,9 +350,17 @@ def replay(mcap_path: str | Path, rrd_path: str | Path, geometry_every: int = 10
             rec.write(poser.sample(end, js, forces, energy))
         for ns, text in events:
             rec.note(text, t=ns * 1e-9)
-    return {"rrd": str(rrd_path), "scene": model.name, "samples": rec.samples,
-            "start": first[0] * 1e-9, "end": end * 1e-9, "events": len(events),
-            "complete": info.complete, "messages": counts, "damage": damage}
+    return {
+        "rrd": str(rrd_path),
+        "scene": model.name,
+        "samples": rec.samples,
+        "start": first[0] * 1e-9,
+        "end": end * 1e-9,
+        "events": len(events),
+        "complete": info.complete,
+        "messages": counts,
+        "damage": damage,
+    }
 
 
 # ---------------------------------------------------------------- recovery

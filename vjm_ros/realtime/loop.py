@@ -345,9 +345,11 @@ class TickLoop:
                 remaining = deadline - self._clock()
                 if remaining <= 0:
                     self.lockstep_timeouts += 1
-                    self.outputs.notice("lockstep_timeout", f"no command within lockstep_timeout"
-                                        f" = {opts.lockstep_timeout:g} s at t = {self.sim.t:.6g}"
-                                        " s; stepping with the efforts in force")
+                    self.outputs.notice(
+                        "lockstep_timeout",
+                        f"no command within lockstep_timeout = {opts.lockstep_timeout:g} s at "
+                        f"t = {self.sim.t:.6g} s; stepping with the efforts in force",
+                    )
                     return True
                 if self.commands.wait_fresh(min(remaining, WAIT_SLICE)):
                     return True
@@ -391,9 +393,11 @@ class TickLoop:
             self.poll_inputs()
         latched = self.commands.latch()
         if latched.timed_out:
-            self.outputs.notice("command_timeout", f"no valid command for "
-                                f"{self.commands.timeout:g} s: efforts set to zero at "
-                                f"t = {self.sim.t:.6g} s")
+            self.outputs.notice(
+                "command_timeout",
+                f"no valid command for {self.commands.timeout:g} s: efforts set to zero at "
+                f"t = {self.sim.t:.6g} s",
+            )
         sim, opts, outputs = self.sim, self.options, self.outputs
         if latched.fresh or latched.timed_out:
             sim.set_efforts(latched.efforts)
@@ -482,13 +486,17 @@ class TickLoop:
 
     def report(self) -> dict:
         """Current health figures (starts a new report window)."""
-        c = self.commands
-        counters = {"commands_accepted": c.accepted, "commands_rejected": c.rejected,
-                    "refused_oversize_commands": c.oversize, "efforts_clamped": c.clamped,
-                    "command_timeouts": c.timeouts, "lockstep_timeouts": self.lockstep_timeouts}
+        counters = {
+            "commands_accepted": self.commands.accepted,
+            "commands_rejected": self.commands.rejected,
+            "refused_oversize_commands": self.commands.oversize,
+            "efforts_clamped": self.commands.clamped,
+            "command_timeouts": self.commands.timeouts,
+            "lockstep_timeouts": self.lockstep_timeouts,
+        }
         if self.wrenches is not None:
-            counters.update(wrenches_accepted=self.wrenches.accepted,
-                            wrenches_refused=self.wrenches.refused)
+            counters["wrenches_accepted"] = self.wrenches.accepted
+            counters["wrenches_refused"] = self.wrenches.refused
         return self.monitor.report(self.time, self.pacer.stats, counters)
 
     def _idle(self) -> None:

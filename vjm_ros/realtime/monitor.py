@@ -145,21 +145,30 @@ class Monitor:
         now = self._clock()
         w = self._window
         wall = now - w.wall_start
-        totals = {"ticks": pacing.ticks, "late_ticks": pacing.late, "missed_ticks": pacing.missed,
-                  "resyncs": pacing.resyncs, **(counters or {})}
-        out = {"realtime_factor": (sim_time - w.sim_start) / wall if wall > 0 else math.nan,
-               "sim_time": sim_time}
+        totals = {
+            "ticks": pacing.ticks,
+            "late_ticks": pacing.late,
+            "missed_ticks": pacing.missed,
+            "resyncs": pacing.resyncs,
+            **(counters or {}),
+        }
+        out = {
+            "realtime_factor": (sim_time - w.sim_start) / wall if wall > 0 else math.nan,
+            "sim_time": sim_time,
+        }
         for key, value in totals.items():
             out[key] = value
             out[f"{key}_window"] = value - w.counters.get(key, 0)
-        out.update({
-            "max_lateness": pacing.max_lateness,
-            "max_closure_error": w.max_closure_error,
-            "max_closure_error_run": self.max_closure_error,
-            "sigma_min": w.sigma_min if math.isfinite(w.sigma_min) else math.nan,
-            "energy_balance_residual": self.ledger.residual,
-            "energy_balance_residual_max": self.ledger.max_residual,
-        })
+        out.update(
+            {
+                "max_lateness": pacing.max_lateness,
+                "max_closure_error": w.max_closure_error,
+                "max_closure_error_run": self.max_closure_error,
+                "sigma_min": w.sigma_min if math.isfinite(w.sigma_min) else math.nan,
+                "energy_balance_residual": self.ledger.residual,
+                "energy_balance_residual_max": self.ledger.max_residual,
+            }
+        )
         self._window = Window(now, sim_time, totals)
         return out
 
@@ -177,9 +186,11 @@ def assess(report: dict, paused: bool = False) -> tuple[int, str]:
     """
     if paused:
         return OK, f"paused at t = {report['sim_time']:.6g} s"
-    problems = [f"{report[key]} {what}" for key, what in (
-        ("missed_ticks_window", "missed ticks"), ("lockstep_timeouts_window", "lockstep timeouts"))
-        if report.get(key, 0)]
+    problems = []
+    if report.get("missed_ticks_window", 0):
+        problems.append(f"{report['missed_ticks_window']} missed ticks")
+    if report.get("lockstep_timeouts_window", 0):
+        problems.append(f"{report['lockstep_timeouts_window']} lockstep timeouts")
     rtf = report["realtime_factor"]
     text = f"running, realtime factor {rtf:.3g}" if math.isfinite(rtf) else "running"
     if problems:
