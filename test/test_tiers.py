@@ -259,6 +259,21 @@ def test_a_short_run_never_imports_numba(tmp_path):
         assert plain == compiled, name
 
 
+def test_with_the_tiers_off_the_csv_writer_is_loaded_before_the_run(tmp_path):
+    """``VJM_TIERED=0`` (what the benchmarks set): preparing an entry point loads its compiled
+    code from numba's cache then and there, as with the tiers on. Before, it only marked it
+    ready, and ``vjm run --out`` loaded the CSV writer at its first table, in the CSV's thread
+    and inside the run's ``wall_time`` (150 ms of a 10 s four-bar run with all three logs)."""
+    _vjm(["run", "four_bar", "--duration", "0.1", "--out", str(tmp_path / "fill")], None)
+    script = ("from vjm_ros.sim import float_text, trajectory\n"
+              "trajectory.prepare_csv_writer(10**6)\n"
+              "print(len(float_text._csv.overloads))\n")
+    environ = dict(os.environ, **{tiers.ENVIRONMENT: "0"})
+    done = subprocess.run([sys.executable, "-c", script], env=environ, capture_output=True,
+                          text=True, timeout=600, check=True)
+    assert done.stdout.split()[-1] == "1", done.stdout + done.stderr  # loaded, none called
+
+
 def test_with_numbas_jit_disabled_a_run_is_plain_python(tmp_path):
     """``NUMBA_DISABLE_JIT=1`` (numba's switch for debugging kernels in Python): the compiled
     functions are the plain ones once numba is imported, the tiers load nothing, and the run

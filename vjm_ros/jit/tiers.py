@@ -204,9 +204,10 @@ class Tiered:
             start = time.perf_counter()
             try:
                 self._resolve()
-                # a plain function where numba compiles nothing (NUMBA_DISABLE_JIT)
-                if (not enabled() or not jit.is_compiled(self.compiled)
-                        or load_cached(self.compiled, args)):
+                # a plain function where numba compiles nothing (NUMBA_DISABLE_JIT); with the
+                # tiers off, loaded from the cache now too, else compiled at the first call
+                if (not jit.is_compiled(self.compiled) or load_cached(self.compiled, args)
+                        or not enabled()):
                     self._ready = True
                     return
                 self._request = server().request(self.module, self.name, args)
