@@ -92,6 +92,7 @@ class Mechanism:
         self._layout = closure_layout(model, self._packed.blocks)
         self._data = self.new_data()
         self._shapes = layout.output_shapes(self._packed)
+        self._observe_data: tuple | None = None  # observe()'s workspace, made at its first call
         # the compiled copies with the hub solves only where there is a hub layout (they take
         # seconds more to compile)
         hub = self._layout[r, 0] >= 0
@@ -340,10 +341,12 @@ class Mechanism:
             As :meth:`advance_observed` takes them; ``out`` needs one row.
         """
         self.evaluations += 1
+        if self._observe_data is None:  # output buffers of its own, the scratch arrays shared
+            self._observe_data = layout.as_arguments(self._fresh_outputs())
         observe = self._observe_state
         status = observe(as_vector(q), as_vector(qd), as_vector(tau),
-                         layout.as_arguments(self._packed),
-                         layout.as_arguments(self._fresh_outputs()), lengths, plink, plocal, out)
+                         layout.as_arguments(self._packed), self._observe_data, lengths, plink,
+                         plocal, out)
         if type(observe) is tiers.Tiered and observe.ready:
             self._observe_state = observe.compiled
         if status:
