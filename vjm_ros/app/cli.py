@@ -300,7 +300,7 @@ def _cmd_run(args) -> int:
         prepare_csv_writer(ticks + 1)
     if preloading is not None:  # library imports are start-up, like loading compiled code
         preloading.join()
-    wall0, loading0 = time.perf_counter(), tiers.loading_seconds()
+    wall0, loading0 = time.perf_counter(), tiers.loading_seconds()  # set again at the first tick
     with StopSignals() as stop:
         try:
             openers = _log_openers(args, scene, sim, duration)
