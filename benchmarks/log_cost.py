@@ -175,7 +175,7 @@ PARTS = (
     ("csv: trajectory.csv", "sim/trajectory.py", "catch_up"),
     ("mcap: open", "logs/mcap_recorder.py", "__init__"),
     ("mcap: encode blocks", "logs/mcap_block.py", "encode"),
-    ("mcap: add records, index", "logs/mcap_block.py", "add_records"),
+    ("mcap: add records, index", "logs/mcap_block.py", "add_run"),
     ("mcap: close chunks", "logs/mcap_block.py", "_Writer__finalize_chunk"),
     ("mcap:   of which zstd", "~",
      "<method 'compress' of 'zstandard.backend_c.ZstdCompressor' objects>"),

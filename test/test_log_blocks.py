@@ -30,8 +30,9 @@ LOCKED_CRANK = """  - name: crank_lock
     link: crank
     target: {ground: true}
 actuators:"""
-BLOCKS = (50, 50, 37, 50, 13)
-"""Rows of the blocks written: uneven, so batches and decimation fall mid-block."""
+BLOCKS = (50, 50, 37, 50, 13, 1, 3, 9)
+"""Rows of the blocks written: uneven, so batches and decimation fall mid-block, and short, so
+that blocks with a single marker or none are written too (the live node's blocks)."""
 
 
 def load(name: str, tmp_path: Path):

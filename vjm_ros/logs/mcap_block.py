@@ -8,8 +8,11 @@ column, plus the ``markers`` record after the other messages of every ``marker_e
 The bytes equal those of the per-message encoders (test/test_log_blocks.py).
 
 :class:`BlockWriter` is the ``mcap`` writer (1.6, pinned) taking such runs of records: its chunk
-builder keeps the message indexes as arrays and writes them in one piece; statistics and indexes
-are those the writer keeps for messages added one by one.
+builder copies them into one buffer kept for the whole file and keeps the message indexes as runs
+of arrays; each chunk is written with its indexes in one call to the file. Statistics and indexes
+are those the writer keeps for messages added one by one. The encoder, too, writes every block
+into buffers it keeps, in place: a long run allocates no memory per block (fresh pages cost the
+operating system a fault and a clearing each).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 import zstandard
 from mcap._chunk_builder import ChunkBuilder
 from mcap.opcode import Opcode
-from mcap.records import Chunk, ChunkIndex, Message
+from mcap.records import ChunkIndex, Message
 from mcap.writer import CompressionType, IndexType, Writer
 
 from vjm_ros.logs import cdr, messages
@@ -35,59 +38,118 @@ NS_PER_S = 1_000_000_000
 
 
 class BulkIndex:
-    """Message index of one channel in the open chunk: log times and offsets as arrays."""
+    """Message index of one channel in the open chunk: runs of log times and chunk offsets."""
 
     def __init__(self, channel_id: int):
         self.channel_id = channel_id
-        self.times: list[np.ndarray] = []
-        self.offsets: list[np.ndarray] = []
+        self.runs: list[tuple] = []
+        self.count = 0
 
-    def add(self, times: np.ndarray, offsets: np.ndarray) -> None:
-        """Entries of messages at ``times`` (ns) and chunk ``offsets`` (bytes), in file order."""
-        self.times.append(times)
-        self.offsets.append(offsets)
+    def add(self, times, offsets, shift: int = 0) -> None:
+        """Entries of messages at ``times`` (ns) and chunk offsets ``offsets + shift`` (bytes),
+        in file order (arrays or sequences of int, kept until :meth:`record`)."""
+        self.runs.append((times, offsets, shift))
+        self.count += len(times)
+
+    def record(self) -> bytes:
+        """The MessageIndex record, as :class:`mcap.records.MessageIndex` writes it."""
+        entries = np.empty((self.count, 2), dtype="<u8")
+        at = 0
+        for times, offsets, shift in self.runs:
+            n = len(times)
+            entries[at : at + n, 0] = times
+            entries[at : at + n, 1] = offsets
+            if shift:
+                entries[at : at + n, 1] += shift
+            at += n
+        return MESSAGE_INDEX_HEADER.pack(Opcode.MESSAGE_INDEX, 6 + entries.nbytes,
+                                         self.channel_id, entries.nbytes) + entries.tobytes()
 
     def write(self, stream) -> None:
-        """The MessageIndex record, as :class:`mcap.records.MessageIndex` writes it."""
-        entries = np.empty((sum(len(t) for t in self.times), 2), dtype="<u8")
-        entries[:, 0] = np.concatenate(self.times)
-        entries[:, 1] = np.concatenate(self.offsets)
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(entries.nbytes)
-        stream.write(entries.tobytes())
-        stream.finish_record()
+        """Write :meth:`record` to ``stream`` (the ``mcap`` writer's record builder)."""
+        stream.write(self.record())
+
+
+MESSAGE_INDEX_HEADER = struct.Struct("<BQHI")
+"""Opcode, record length, channel id and byte length of the entries of a MessageIndex record."""
+CHUNK_HEADER = struct.Struct("<BQQQQI")
+"""Opcode, record length, message start and end times, uncompressed size and CRC of a Chunk."""
 
 
 class BlockChunkBuilder(ChunkBuilder):
-    """The ``mcap`` chunk builder with message indexes kept as arrays, and runs of records."""
+    """The ``mcap`` chunk builder taking runs of records, copied into one buffer kept for the
+    whole file (so a chunk's records are never joined from pieces, nor written into fresh
+    memory), with message indexes kept as runs of arrays."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.buffer = bytearray(1 << 16)
+        self.size = 0
+
+    @property
+    def count(self) -> int:
+        return self.size + self.record_writer.count
+
+    def _append(self, data) -> None:
+        """Copy ``data`` (bytes-like) to the end of the chunk's records."""
+        end = self.size + len(data)
+        if end > len(self.buffer):
+            grown = bytearray(max(end, 2 * len(self.buffer)))
+            grown[: self.size] = memoryview(self.buffer)[: self.size]
+            self.buffer = grown
+        memoryview(self.buffer)[self.size : end] = data
+        self.size = end
+
+    def _take_records(self) -> None:
+        """Move what the records writer holds (schemas, channels, single messages) to the
+        buffer."""
+        if self.record_writer.count:
+            self._append(self.record_writer.end())
 
     def add_message(self, message: Message) -> None:
-        offset = self.record_writer.count
+        offset = self.count
         message.write(self.record_writer)
-        self._note([(message.channel_id, np.array([message.log_time]), np.array([offset]))])
+        self._span(message.log_time, message.log_time, 1)
+        self._index(message.channel_id).add((message.log_time,), (offset,))
 
-    def add_records(self, data, groups: Sequence[tuple]) -> None:
-        """Append Message records ``data`` (bytes); ``groups`` holds ``(channel id, log times
-        (ns, never decreasing), offsets into data (bytes))`` per channel, channels in order of
-        first appearance."""
-        base = self.record_writer.count
-        self.record_writer.write(data)
-        self._note([(channel, times, offsets + base) for channel, times, offsets in groups])
+    def add_run(self, data, times: np.ndarray, starts: np.ndarray,
+                columns: Sequence[tuple[int, int]], markers: tuple | None) -> None:
+        """Append the Message records ``data`` of ticks logged at ``times`` (ns, never
+        decreasing), each tick's records starting at byte ``starts`` of ``data``, with one
+        message per tick on each channel of ``columns`` (``(channel id, byte offset in the
+        tick)``), then the ``markers`` ``(channel id, log times, offsets into data)``, if any."""
+        self._take_records()
+        base = self.size
+        self._append(data)
+        self._span(int(times[0]), int(times[-1]), len(times) * len(columns))
+        for channel, at in columns:
+            self._index(channel).add(times, starts, base + at)
+        if markers is not None:
+            channel, mtimes, offsets = markers
+            self.num_messages += len(mtimes)
+            self._index(channel).add(mtimes, offsets, base)
 
-    def _note(self, groups: Sequence[tuple]) -> None:
-        for channel, times, offsets in groups:
-            if len(times) == 0:
-                continue
-            lo, hi = int(times[0]), int(times[-1])  # log times never decrease
-            self.message_start_time = lo if self.num_messages == 0 else min(
-                self.message_start_time, lo)
-            self.message_end_time = max(self.message_end_time, hi)
-            self.num_messages += len(times)
-            index = self.message_indices.get(channel)
-            if index is None:
-                index = self.message_indices[channel] = BulkIndex(channel)
-            index.add(times, offsets)
+    def end(self) -> memoryview:
+        """The chunk's records (a view of the buffer: valid until the next record is added)."""
+        self._take_records()
+        return memoryview(self.buffer)[: self.size]
+
+    def reset(self) -> None:
+        super().reset()
+        self.size = 0
+
+    def _span(self, lo: int, hi: int, count: int) -> None:
+        """Count ``count`` messages logged from ``lo`` to ``hi`` (ns) in the chunk."""
+        self.message_start_time = lo if self.num_messages == 0 else min(
+            self.message_start_time, lo)
+        self.message_end_time = max(self.message_end_time, hi)
+        self.num_messages += count
+
+    def _index(self, channel: int) -> BulkIndex:
+        index = self.message_indices.get(channel)
+        if index is None:
+            index = self.message_indices[channel] = BulkIndex(channel)
+        return index
 
 
 ZSTD_LEVEL = -3
@@ -115,25 +177,31 @@ class BlockWriter(Writer):
         self._Writer__chunk_builder = self._builder
         self._zstd = zstandard.ZstdCompressor(level=zstd_level)
 
-    def add_records(self, data, groups: Sequence[tuple]) -> None:
-        """Add Message records to the open chunk (see :meth:`BlockChunkBuilder.add_records`);
-        statistics as :meth:`add_message` keeps them; the chunk is closed when over its size."""
+    def add_run(self, data, times: np.ndarray, starts: np.ndarray,
+                columns: Sequence[tuple[int, int]], markers: tuple | None) -> None:
+        """Add a run of ticks' Message records to the open chunk (see
+        :meth:`BlockChunkBuilder.add_run`); statistics as :meth:`add_message` keeps them; the
+        chunk is closed when over its size."""
         stats = self._Writer__statistics
-        for channel, times, _ in groups:
-            if len(times) == 0:
-                continue
-            lo, hi = int(times[0]), int(times[-1])
-            stats.message_start_time = lo if stats.message_count == 0 else min(
-                stats.message_start_time, lo)
-            stats.message_end_time = max(stats.message_end_time, hi)
-            stats.channel_message_counts[channel] += len(times)
-            stats.message_count += len(times)
-        self._builder.add_records(data, groups)
+        lo, hi, ticks = int(times[0]), int(times[-1]), len(times)
+        counts = stats.channel_message_counts
+        for channel, _ in columns:
+            counts[channel] += ticks
+        added = ticks * len(columns)
+        if markers is not None:
+            counts[markers[0]] += len(markers[1])
+            added += len(markers[1])
+        stats.message_start_time = lo if stats.message_count == 0 else min(
+            stats.message_start_time, lo)
+        stats.message_end_time = max(stats.message_end_time, hi)
+        stats.message_count += added
+        self._builder.add_run(data, times, starts, columns, markers)
         self._Writer__maybe_finalize_chunk()
 
     def _Writer__finalize_chunk(self) -> None:  # noqa: N802 - the writer's private name
         """The writer's ``__finalize_chunk`` with zstd at :attr:`zstd_level`: the chunk record,
-        its chunk index and its message indexes, as the writer writes them."""
+        its chunk index and its message indexes, the bytes the writer writes, packed whole and
+        handed to the file in one call."""
         builder = self._builder
         if builder.num_messages == 0:
             return
@@ -148,40 +216,45 @@ class BlockWriter(Writer):
             name, compressed = "lz4", lz4.frame.compress(chunk_data)
         else:
             name, compressed = "", chunk_data
-        chunk = Chunk(
-            compression=name,
-            data=compressed,
+        crc = zlib.crc32(chunk_data) if self._Writer__enable_crcs else 0
+        label = name.encode()
+        length = CHUNK_HEADER.size - 9 + 4 + len(label) + 8 + len(compressed)
+        head = CHUNK_HEADER.pack(Opcode.CHUNK, length, builder.message_start_time,
+                                 builder.message_end_time, len(chunk_data), crc)
+        head += struct.pack("<I", len(label)) + label + struct.pack("<Q", len(compressed))
+        self._Writer__flush()
+        stream = self._Writer__stream
+        chunk_start_offset = stream.tell()
+        index_start = chunk_start_offset + 9 + length
+        offsets: dict[int, int] = {}
+        indexes: list[bytes] = []
+        if self._Writer__index_types & IndexType.MESSAGE:
+            at = index_start
+            for channel, index in builder.message_indices.items():
+                offsets[channel] = at
+                indexes.append(index.record())
+                at += len(indexes[-1])
+        index_data = b"".join(indexes)
+        self._write_data(b"".join((head, compressed, index_data)))  # one call to the OS
+        self._Writer__chunk_indices.append(ChunkIndex(
             message_start_time=builder.message_start_time,
             message_end_time=builder.message_end_time,
-            uncompressed_crc=zlib.crc32(chunk_data) if self._Writer__enable_crcs else 0,
-            uncompressed_size=len(chunk_data),
-        )
-        records, stream = self._Writer__record_builder, self._Writer__stream
-        self._Writer__flush()
-        chunk_start_offset = stream.tell()
-        chunk.write(records)
-        chunk_index = ChunkIndex(
-            message_start_time=chunk.message_start_time,
-            message_end_time=chunk.message_end_time,
             chunk_start_offset=chunk_start_offset,
-            chunk_length=records.count,
-            message_index_offsets={},
-            message_index_length=0,
-            compression=chunk.compression,
+            chunk_length=9 + length,
+            message_index_offsets=offsets,
+            message_index_length=len(index_data),
+            compression=name,
             compressed_size=len(compressed),
-            uncompressed_size=chunk.uncompressed_size,
-        )
-        self._Writer__flush()
-        message_index_start_offset = stream.tell()
-        if self._Writer__index_types & IndexType.MESSAGE:
-            for channel, index in builder.message_indices.items():
-                chunk_index.message_index_offsets[channel] = (
-                    message_index_start_offset + records.count)
-                index.write(records)
-        chunk_index.message_index_length = records.count
-        self._Writer__flush()
-        self._Writer__chunk_indices.append(chunk_index)
+            uncompressed_size=len(chunk_data),
+        ))
         builder.reset()
+
+    def _write_data(self, data) -> None:
+        """Hand ``data`` to the file, as the writer's ``__flush`` does (with its data-section
+        CRC when the writer keeps one)."""
+        if self._Writer__enable_data_crcs:
+            self._Writer__data_section_crc = zlib.crc32(data, self._Writer__data_section_crc)
+        self._Writer__stream.write(data)
 
 
 # ---------------------------------------------------------------- records of a block
@@ -268,8 +341,13 @@ class BlockEncoder:
         ]
         self.starts = np.cumsum([0] + [len(kd.image) for kd in self.kinds])
         self.image = np.concatenate([kd.image for kd in self.kinds])
+        self.columns = [(kd.channel, int(at)) for kd, at in zip(self.kinds, self.starts,
+                                                                strict=False)]
+        """Channel id and byte offset in a tick's records of each per-tick message."""
         self.marker_channel = channels.get(topics.markers)
         self.markers: _Kind | None = None  # from the first block's geometry
+        self._table = np.empty(0, dtype=np.uint8)
+        self._out = np.empty(0, dtype=np.uint8)
 
     def _values(self, block, rows: int) -> list[list[np.ndarray]]:
         """The float64 runs of each per-tick record, in the order of :attr:`kinds`."""
@@ -299,11 +377,14 @@ class BlockEncoder:
 
     def encode(self, block, ns: np.ndarray, first: int) -> EncodedBlock:
         """Records of the block's rows (``len(ns)``) logged at ``ns`` (ns), the first being
-        sample number ``first`` of the recording."""
+        sample number ``first`` of the recording (valid until the next call: the records are
+        written into buffers the encoder keeps)."""
         rows = len(ns)
         seq = (first + np.arange(rows)) & 0xFFFFFFFF
         sec, nsec = np.divmod(ns, NS_PER_S)
-        table = np.empty((rows, len(self.image)), dtype=np.uint8)
+        size = len(self.image)
+        table = self._table = _at_least(self._table, rows * size).reshape(-1)[: rows * size]
+        table = table.reshape(rows, size)
         table[:] = self.image
         for kind, start, values in zip(self.kinds, self.starts, self._values(block, rows),
                                        strict=False):
@@ -311,21 +392,34 @@ class BlockEncoder:
         ticks = np.arange(rows)
         marked = (np.nonzero((first + ticks) % self.marker_every == 0)[0]
                   if self.marker_every > 0 else ticks[:0])
-        pieces, size, marker_size = [table], len(self.image), 0
-        if len(marked):
-            mrows = self._marker_rows(block, marked, seq, ns, sec, nsec)
-            marker_size = mrows.shape[1]
-            pieces, prev = [], 0
-            for g, i in enumerate(marked.tolist()):
-                pieces += [table[prev : i + 1], mrows[g]]
-                prev = i + 1
-            pieces.append(table[prev:])
         tick_starts = np.empty(rows + 1, dtype=np.int64)
-        tick_starts[:-1] = ticks * size + np.searchsorted(marked, ticks) * marker_size
-        tick_starts[-1] = rows * size + len(marked) * marker_size
-        columns = [(kd.channel, int(s)) for kd, s in zip(self.kinds, self.starts, strict=False)]
-        return EncodedBlock(b"".join(pieces), ns, tick_starts, columns, self.marker_channel,
-                            marked, size)
+        if len(marked) == 0:
+            tick_starts[:-1] = ticks * size
+            tick_starts[-1] = rows * size
+            return EncodedBlock(table.reshape(-1), ns, tick_starts, self.columns,
+                                self.marker_channel, marked, size)
+        mrows = self._marker_rows(block, marked, seq, ns, sec, nsec)
+        msize = mrows.shape[1]
+        tick_starts[:-1] = ticks * size + np.searchsorted(marked, ticks) * msize
+        tick_starts[-1] = rows * size + len(marked) * msize
+        out = self._out = _at_least(self._out, int(tick_starts[-1]))
+        # [ticks up to the first marked one][markers] [every ticks][markers] ... [the rest]
+        prefix, every = int(marked[0]) + 1, self.marker_every
+        groups = len(marked) - 1
+        out[: prefix * size] = table[:prefix].reshape(-1)
+        at = prefix * size
+        out[at : at + msize] = mrows[0]
+        at += msize
+        period = every * size + msize
+        region = out[at : at + groups * period].reshape(groups, period)
+        region[:, : every * size] = table[prefix : prefix + groups * every].reshape(
+            groups, every * size)
+        region[:, every * size :] = mrows[1:]
+        at += groups * period
+        rest = prefix + groups * every
+        out[at : at + (rows - rest) * size] = table[rest:].reshape(-1)
+        return EncodedBlock(out[: int(tick_starts[-1])], ns, tick_starts, self.columns,
+                            self.marker_channel, marked, size)
 
     def _marker_rows(self, block, marked, seq, ns, sec, nsec) -> np.ndarray:
         """Records of the markers at ticks ``marked`` (G, record size)."""
@@ -341,12 +435,17 @@ class BlockEncoder:
         return mrows
 
 
+def _at_least(buffer: np.ndarray, size: int) -> np.ndarray:
+    """``buffer`` if it holds ``size`` bytes, else a larger one (kept by the caller)."""
+    return buffer if len(buffer) >= size else np.empty(max(size, 2 * len(buffer)), np.uint8)
+
+
 class EncodedBlock:
     """The Message records of a block of ticks and where each message lies.
 
     Parameters
     ----------
-    data : bytes
+    data : ndarray of uint8
         The records, tick after tick.
     ns : ndarray of int, shape (rows,)
         Log time of each tick, ns.
@@ -361,8 +460,9 @@ class EncodedBlock:
         Byte offset of the markers record in its tick.
     """
 
-    def __init__(self, data: bytes, ns: np.ndarray, tick_starts: np.ndarray, columns: list,
-                 marker_channel: int | None, marked: np.ndarray, marker_at: int):
+    def __init__(self, data: np.ndarray, ns: np.ndarray, tick_starts: np.ndarray,
+                 columns: list, marker_channel: int | None, marked: np.ndarray,
+                 marker_at: int):
         self.data = memoryview(data)
         self.ns = ns
         self.tick_starts = tick_starts
@@ -371,16 +471,17 @@ class EncodedBlock:
         self.marked = marked
         self.marker_at = marker_at
 
-    def records(self, start: int, stop: int) -> tuple[memoryview, list[tuple]]:
-        """The records of ticks ``start .. stop - 1`` and their messages as ``(channel id,
-        log times, offsets into the records)`` per channel, in order of first appearance."""
+    def run(self, start: int, stop: int) -> tuple:
+        """The records of ticks ``start .. stop - 1`` as the arguments of
+        :meth:`BlockWriter.add_run`: ``(records, log times, offsets of the ticks in the records,
+        columns, markers)``, ``markers`` being ``(channel id, log times, offsets)`` or None."""
         lo = int(self.tick_starts[start])
         starts = self.tick_starts[start:stop] - lo
-        times = self.ns[start:stop]
-        groups = [(channel, times, starts + at) for channel, at in self.columns]
         first, last = np.searchsorted(self.marked, (start, stop))
+        markers = None
         if last > first:
             ticks = self.marked[first:last]
-            groups.append((self.marker_channel, self.ns[ticks],
-                           self.tick_starts[ticks] - lo + self.marker_at))
-        return self.data[lo : int(self.tick_starts[stop])], groups
+            markers = (self.marker_channel, self.ns[ticks],
+                       self.tick_starts[ticks] - lo + self.marker_at)
+        return (self.data[lo : int(self.tick_starts[stop])], self.ns[start:stop], starts,
+                self.columns, markers)

@@ -294,7 +294,7 @@ class McapRecorder(Recorder):
         start = 0
         while start < rows:
             stop, close = self._chunk_stop(ns, start)
-            self._add_records(*encoded.records(start, stop))
+            self._add_run(*encoded.run(start, stop))
             if close:
                 self.flush()
             start = stop
@@ -316,13 +316,19 @@ class McapRecorder(Recorder):
             return end + 1, True
         return len(ns), False
 
-    def _add_records(self, data, groups: list[tuple]) -> None:
-        self._writer.add_records(data, groups)
-        for channel, times, _ in groups:
-            if len(times):
-                self.bag.note_many(self._records[channel], len(times), int(times.min()),
-                                   int(times.max()))
-                self.message_count += len(times)
+    def _add_run(self, data, times: np.ndarray, starts: np.ndarray, columns: list,
+                 markers: tuple | None) -> None:
+        """Add a run of ticks' records (:meth:`mcap_block.EncodedBlock.run`) and count them."""
+        self._writer.add_run(data, times, starts, columns, markers)
+        lo, hi, ticks = int(times[0]), int(times[-1]), len(times)
+        note, records = self.bag.note_many, self._records
+        for channel, _ in columns:
+            note(records[channel], ticks, lo, hi)
+        self.message_count += ticks * len(columns)
+        if markers is not None:
+            channel, mtimes, _ = markers
+            note(records[channel], len(mtimes), int(mtimes[0]), int(mtimes[-1]))
+            self.message_count += len(mtimes)
 
     @atomic
     def note(self, text: str) -> None:
