@@ -8,9 +8,15 @@ shortest-digit algorithm (Ulf Adams, PLDI 2018: the digits from one 64 x 128-bit
 power of five and the interval of the double), compiled. test/test_trajectory_csv.py holds it to
 ``repr`` on millions of random bit patterns and the edge cases.
 
-Cost: about 38 ns per value on the four-bar's trajectory (48 ns before the helpers were compiled
-without reference counting, ``jit(allocates=False)``, and wrote digits two at a time): the CSV
-of a 10 s run at 1 kHz (250 000 values) in about 10 ms, without holding the GIL.
+Cost, the four-bar's trajectory (10 001 rows x 25 doubles, rk4, exact closure) on a 2-core
+AMD EPYC VM at 2.45 GHz, with other work running, best of 36 passes, in one process with the
+writer before: about 36 ns per value (57 before), 9 ms for the CSV of a 10 s run at 1 kHz,
+without holding the GIL. Ryu's digits take some 22 ns of it; the text is written 17 digits at
+a time (the shortest digits left-aligned, as two 8-digit words of ASCII, each made at once by
+multiplications and stored whole) and placed by the position of the point, without a loop but
+for the integer part; one 64 x 128-bit product gives the value and both ends of its interval
+(Ryu's ``mulShiftAll64``), where three were made before. :class:`~vjm_ros.sim.trajectory.CsvStream`
+has each batch written into a buffer it keeps (:func:`csv_into`).
 """
 
 from __future__ import annotations
@@ -44,15 +50,23 @@ def _tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 POW5_SPLIT, POW5_INV_SPLIT = _tables()
+POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
 
 _U32 = np.uint64(0xFFFFFFFF)
 _S32 = np.uint64(32)
+_ZERO = np.uint64(0)
 _ONE = np.uint64(1)
+_TWO = np.uint64(2)
+_FIVE = np.uint64(5)
 _TEN = np.uint64(10)
 _HUNDRED = np.uint64(100)
+_E8 = np.uint64(10**8)
+_MANTISSA = np.uint64((1 << 52) - 1)
+_ABS = np.uint64((1 << 63) - 1)
+_SIGN = np.uint64(63)
 
 
-@jit(allocates=False)
+@jit(allocates=False, inline="always")
 def _umul128(a, b):
     """``a * b`` of two uint64 as (high, low) words."""
     a_lo, a_hi, b_lo, b_hi = a & _U32, a >> _S32, b & _U32, b >> _S32
@@ -63,28 +77,54 @@ def _umul128(a, b):
     return high, ((mid2 & _U32) << _S32) | (b00 & _U32)
 
 
-@jit(allocates=False)
-def _mul_shift(m, lo, hi, j):
-    """``(m * (hi 2^64 + lo)) >> j`` for ``m`` < 2^55 and 64 < ``j`` < 128."""
-    high1, low1 = _umul128(m, hi)
-    high0, _ = _umul128(m, lo)
-    total = high0 + low1
-    if total < high0:
-        high1 += _ONE
-    dist = np.uint64(j - 64)
-    return (high1 << (np.uint64(64) - dist)) | (total >> dist)
+@jit(allocates=False, inline="always")
+def _shift_right(low, high, dist):
+    """Bits ``dist`` .. ``dist + 63`` of ``high 2^64 + low`` (0 < ``dist`` < 64)."""
+    return (high << (np.uint64(64) - dist)) | (low >> dist)
 
 
-@jit(allocates=False)
+@jit(allocates=False, inline="always")
+def _mul_shift_all(m2, lo, hi, j, mm_shift):
+    """Ryu's ``mulShiftAll64``: ``(4 m2 + d) (hi 2^64 + lo) >> j`` for d = 0, 2 and
+    -1 - ``mm_shift``, from two 64 x 64-bit products (``m2`` < 2^53, 64 < ``j`` - 2 < 128)."""
+    m = m2 << _ONE
+    tmp, low = _umul128(m, lo)
+    high, mid_lo = _umul128(m, hi)
+    mid = tmp + mid_lo
+    if mid < tmp:
+        high += _ONE
+    low2 = low + lo
+    mid2 = mid + hi + (_ONE if low2 < low else _ZERO)
+    high2 = high + (_ONE if mid2 < mid else _ZERO)
+    dist = np.uint64(j - 65)
+    vp = _shift_right(mid2, high2, dist)
+    if mm_shift:
+        low3 = low - lo
+        mid3 = mid - hi - (_ONE if low3 > low else _ZERO)
+        high3 = high - (_ONE if mid3 > mid else _ZERO)
+        vm = _shift_right(mid3, high3, dist)
+    else:
+        low3 = low + low
+        mid3 = mid + mid + (_ONE if low3 < low else _ZERO)
+        high3 = high + high + (_ONE if mid3 < mid else _ZERO)
+        low4 = low3 - lo
+        mid4 = mid3 - hi - (_ONE if low4 > low3 else _ZERO)
+        high4 = high3 - (_ONE if mid4 > mid3 else _ZERO)
+        vm = _shift_right(mid4, high4, dist + _ONE)
+    return _shift_right(mid, high, dist), vp, vm
+
+
+@jit(allocates=False, inline="always")
 def _pow5_factor(value):
+    """How many times 5 divides ``value`` (uint64 > 0)."""
     count = 0
-    while value > 0 and value % np.uint64(5) == 0:
-        value //= np.uint64(5)
+    while value > 0 and value % _FIVE == 0:
+        value //= _FIVE
         count += 1
     return count
 
 
-@jit(allocates=False)
+@jit(allocates=False, inline="always")
 def _shortest(mantissa, exponent):
     """Ryu's ``d2d``: shortest digits (uint64) and decimal exponent of a positive finite double
     from its stored mantissa and biased exponent."""
@@ -96,43 +136,36 @@ def _shortest(mantissa, exponent):
         m2 = (_ONE << np.uint64(52)) | mantissa
     accept_bounds = (m2 & _ONE) == 0
     mv = np.uint64(4) * m2
-    mm_shift = np.uint64(1) if (mantissa != 0 or exponent <= 1) else np.uint64(0)
+    mm_shift = mantissa != 0 or exponent <= 1
     vm_trailing, vr_trailing = False, False
     if e2 >= 0:
         q = ((e2 * 78913) >> 18) - (1 if e2 > 3 else 0)
         e10 = q
         k = _POW5_INV_BITCOUNT + ((q * 1217359) >> 19) + 1 - 1
-        i = -e2 + q + k
-        lo, hi = POW5_INV_SPLIT[q, 0], POW5_INV_SPLIT[q, 1]
-        vr = _mul_shift(mv, lo, hi, i)
-        vp = _mul_shift(mv + np.uint64(2), lo, hi, i)
-        vm = _mul_shift(mv - _ONE - mm_shift, lo, hi, i)
+        vr, vp, vm = _mul_shift_all(m2, POW5_INV_SPLIT[q, 0], POW5_INV_SPLIT[q, 1],
+                                    -e2 + q + k, mm_shift)
         if q <= 21:
-            if mv % np.uint64(5) == 0:
+            if mv % _FIVE == 0:
                 vr_trailing = _pow5_factor(mv) >= q
             elif accept_bounds:
-                vm_trailing = _pow5_factor(mv - _ONE - mm_shift) >= q
-            elif _pow5_factor(mv + np.uint64(2)) >= q:
+                vm_trailing = _pow5_factor(mv - _ONE - (_ONE if mm_shift else _ZERO)) >= q
+            elif _pow5_factor(mv + _TWO) >= q:
                 vp -= _ONE
     else:
         q = ((-e2 * 732923) >> 20) - (1 if -e2 > 1 else 0)
         e10 = q + e2
         i = -e2 - q
         k = ((i * 1217359) >> 19) + 1 - _POW5_BITCOUNT
-        j = q - k
-        lo, hi = POW5_SPLIT[i, 0], POW5_SPLIT[i, 1]
-        vr = _mul_shift(mv, lo, hi, j)
-        vp = _mul_shift(mv + np.uint64(2), lo, hi, j)
-        vm = _mul_shift(mv - _ONE - mm_shift, lo, hi, j)
+        vr, vp, vm = _mul_shift_all(m2, POW5_SPLIT[i, 0], POW5_SPLIT[i, 1], q - k, mm_shift)
         if q <= 1:
             vr_trailing = True
             if accept_bounds:
-                vm_trailing = mm_shift == _ONE
+                vm_trailing = mm_shift
             else:
                 vp -= _ONE
         elif q < 63:
             vr_trailing = (mv & ((_ONE << np.uint64(q)) - _ONE)) == 0
-    removed, last = 0, np.uint64(0)
+    removed, last = 0, _ZERO
     if vm_trailing or vr_trailing:
         while vp // _TEN > vm // _TEN:
             vm_trailing = vm_trailing and vm % _TEN == 0
@@ -146,9 +179,9 @@ def _shortest(mantissa, exponent):
                 last = vr % _TEN
                 vr, vp, vm = vr // _TEN, vp // _TEN, vm // _TEN
                 removed += 1
-        if vr_trailing and last == 5 and vr % np.uint64(2) == 0:
+        if vr_trailing and last == _FIVE and vr % _TWO == 0:
             last = np.uint64(4)  # round half to even
-        up = (vr == vm and (not accept_bounds or not vm_trailing)) or last >= 5
+        up = (vr == vm and (not accept_bounds or not vm_trailing)) or last >= _FIVE
     else:
         up = False
         vp100, vm100 = vp // _HUNDRED, vm // _HUNDRED
@@ -162,142 +195,196 @@ def _shortest(mantissa, exponent):
             if vp10 <= vm10:
                 break
             vr10 = vr // _TEN
-            up = vr - _TEN * vr10 >= np.uint64(5)
+            up = vr - _TEN * vr10 >= _FIVE
             vr, vp, vm = vr10, vp10, vm10
             removed += 1
         up = up or vr == vm
-    return vr + (_ONE if up else np.uint64(0)), e10 + removed
+    return vr + (_ONE if up else _ZERO), e10 + removed
 
 
-@jit(allocates=False)
-def _put_bytes(buf, pos, text):
-    """Copy ``text`` (uint8 array) to ``buf[pos:]``; the end position."""
-    for k in range(len(text)):
-        buf[pos + k] = text[k]
-    return pos + len(text)
+@jit(allocates=False, inline="always")
+def _eight(x):
+    """The 8 decimal digits of ``x`` (uint64 < 10^8) as ASCII bytes in one uint64, the first
+    digit in the lowest byte (two 4-digit halves, then 2-digit and 1-digit lanes at once)."""
+    hi = x // np.uint64(10000)
+    merged = hi | ((x - hi * np.uint64(10000)) << _S32)
+    top = ((merged * np.uint64(10486)) >> np.uint64(20)) & np.uint64(0x7F0000007F)
+    hundreds = ((merged - _HUNDRED * top) << np.uint64(16)) + top
+    tens = ((hundreds * np.uint64(103)) >> np.uint64(10)) & np.uint64(0x000F000F000F000F)
+    tens += (hundreds - _TEN * tens) << np.uint64(8)
+    return tens | np.uint64(0x3030303030303030)
 
 
-NAN = np.frombuffer(b"nan", dtype=np.uint8)
-INF = np.frombuffer(b"inf", dtype=np.uint8)
-NEG_INF = np.frombuffer(b"-inf", dtype=np.uint8)
-ZERO = np.frombuffer(b"0.0", dtype=np.uint8)
+@jit(allocates=False, inline="always")
+def _store8(buf, pos, word):
+    """Write the 8 bytes of ``word`` at ``buf[pos:]``, lowest byte first."""
+    at = np.uint64(pos)  # an unsigned index: no check for negative ones, and one 8-byte store
+    for k in range(8):
+        buf[at + np.uint64(k)] = np.uint8((word >> np.uint64(8 * k)) & np.uint64(0xFF))
 
 
-@jit(allocates=False)
-def _put_float(buf, pos, bits):
-    """Write the double of IEEE ``bits`` as ``repr`` does at ``buf[pos:]``; the end position."""
-    exponent = np.int64((bits >> np.uint64(52)) & np.uint64(0x7FF))
-    mantissa = bits & ((_ONE << np.uint64(52)) - _ONE)
-    negative = (bits >> np.uint64(63)) != 0
-    if exponent == 0x7FF:
-        if mantissa != 0:
-            return _put_bytes(buf, pos, NAN)
-        return _put_bytes(buf, pos, NEG_INF if negative else INF)
-    if negative:
-        buf[pos] = 45  # "-"
-        pos += 1
-    if exponent == 0 and mantissa == 0:
-        return _put_bytes(buf, pos, ZERO)
-    digits, e10 = _shortest(mantissa, exponent)
-    count = _decimal_length(digits)
-    point = e10 + count  # the value is 0.d1 d2 ... x 10^point
-    if point <= -4 or point > 16:
-        return _put_scientific(buf, pos, digits, count, point - 1)
-    return _put_positional(buf, pos, digits, count, point)
+@jit(allocates=False, inline="always")
+def _put17(buf, pos, v):
+    """Write the 17 digits of ``v`` (< 10^17, leading zeros included) at ``buf[pos:]``."""
+    hi = v // _E8
+    top = hi // _E8
+    buf[pos] = np.uint8(48 + top)
+    _store8(buf, pos + 1, _eight(hi - top * _E8))
+    _store8(buf, pos + 9, _eight(v - hi * _E8))
 
 
-@jit(allocates=False)
+@jit(allocates=False, inline="always")
 def _decimal_length(v):
-    """Digits of ``v`` (< 10^17)."""
-    count = 1
-    for k in range(1, 17):
-        if v >= POW10[k]:
-            count = k + 1
-        else:
-            break
+    """Digits of ``v`` (1 <= ``v`` < 10^17)."""
+    if v >= POW10[14]:  # without a branch on 15, 16 or 17 digits
+        return 15 + np.int64(v >= POW10[15]) + np.int64(v >= POW10[16])
+    count = 14
+    while v < POW10[count - 1]:
+        count -= 1
     return count
 
 
-POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
-DIGIT_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), dtype=np.uint8)
-
-
-@jit(allocates=False)
-def _put_digits(buf, pos, digits, count):
-    k = count
-    while k >= 2:
-        rest = digits // _HUNDRED
-        pair = 2 * np.int64(digits - _HUNDRED * rest)
-        buf[pos + k - 2] = DIGIT_PAIRS[pair]
-        buf[pos + k - 1] = DIGIT_PAIRS[pair + 1]
-        digits = rest
-        k -= 2
-    if k == 1:
-        buf[pos] = 48 + np.uint8(digits)
-    return pos + count
-
-
-@jit(allocates=False)
-def _put_positional(buf, pos, digits, count, point):
-    if point <= 0:
-        buf[pos] = 48  # "0"
+@jit(allocates=False, inline="always")
+def _put_float(buf, pos, bits):
+    """Write the double of IEEE ``bits`` as ``repr`` does at ``buf[pos:]``; the end position.
+    Writes up to 24 bytes past ``pos`` (digits past the end position included)."""
+    if bits >> _SIGN:
+        buf[pos] = 45  # "-"
+        pos += 1
+    magnitude = bits & _ABS
+    if magnitude == 0:
+        buf[pos] = 48  # "0.0"
+        buf[pos + 1] = 46
+        buf[pos + 2] = 48
+        return pos + 3
+    exponent = np.int64(magnitude >> np.uint64(52))
+    mantissa = magnitude & _MANTISSA
+    if exponent == 0x7FF:
+        if mantissa != 0:
+            pos -= np.int64(bits >> _SIGN)  # no sign
+            buf[pos] = 110  # "nan"
+            buf[pos + 1] = 97
+            buf[pos + 2] = 110
+        else:
+            buf[pos] = 105  # "inf"
+            buf[pos + 1] = 110
+            buf[pos + 2] = 102
+        return pos + 3
+    digits, e10 = _shortest(mantissa, exponent)
+    count = _decimal_length(digits)
+    point = e10 + count  # the value is 0.d1 d2 ... x 10^point
+    aligned = digits * POW10[17 - count]  # the digits, then zeros: 17 of them
+    if point <= -4 or point > 16:  # scientific: d.ddde-XX
+        _put17(buf, pos + 1, aligned)
+        buf[pos] = buf[pos + 1]
         buf[pos + 1] = 46  # "."
-        pos += 2
-        for _ in range(-point):
-            buf[pos] = 48
+        pos += count + 1 if count > 1 else 1
+        exp10 = point - 1
+        buf[pos] = 101  # "e"
+        buf[pos + 1] = 45 if exp10 < 0 else 43  # "-" or "+"
+        e = -exp10 if exp10 < 0 else exp10
+        if e >= 100:
+            buf[pos + 2] = 48 + e // 100
             pos += 1
-        return _put_digits(buf, pos, digits, count)
-    if point >= count:
-        pos = _put_digits(buf, pos, digits, count)
-        for _ in range(point - count):
-            buf[pos] = 48
-            pos += 1
-        buf[pos] = 46  # "."
-        buf[pos + 1] = 48  # "0"
-        return pos + 2
-    start = pos
-    pos = _put_digits(buf, pos + 1, digits, count)  # then move the integer part left by one
+            e %= 100
+        buf[pos + 2] = 48 + e // 10
+        buf[pos + 3] = 48 + e % 10
+        return pos + 4
+    if point <= 0:  # 0.000ddd
+        buf[pos] = 48
+        buf[pos + 1] = 46
+        buf[pos + 2] = 48
+        buf[pos + 3] = 48
+        buf[pos + 4] = 48
+        pos += 2 - point
+        _put17(buf, pos, aligned)
+        return pos + count
+    if point >= count:  # an integer: the digits, zeros up to the point, ".0"
+        _put17(buf, pos, aligned)
+        buf[pos + point] = 46
+        buf[pos + point + 1] = 48
+        return pos + point + 2
+    _put17(buf, pos + 1, aligned)  # then the integer part moves left by one
     for k in range(point):
-        buf[start + k] = buf[start + k + 1]
-    buf[start + point] = 46  # "."
-    return pos
+        buf[pos + k] = buf[pos + k + 1]
+    buf[pos + point] = 46
+    return pos + count + 1
+
+
+VALUE_BYTES = 25
+"""Bytes a value and the comma after it take at most (``-2.2250738585072014e-308,``); the
+writer also stays within them when it writes digits past a value's end."""
+
+
+def buffer_size(rows: int, columns: int) -> int:
+    """Bytes of the buffer :func:`csv_into` needs for a table of ``rows`` x ``columns``.
+
+    Parameters
+    ----------
+    rows, columns : int
+
+    Returns
+    -------
+    int
+        :data:`VALUE_BYTES` per value and two more per row (``\\r\\n``).
+    """
+    return rows * (columns * VALUE_BYTES + 2)
 
 
 @jit(allocates=False)
-def _put_scientific(buf, pos, digits, count, exp10):
-    first = pos
-    pos = _put_digits(buf, pos + 1, digits, count)
-    buf[first] = buf[first + 1]
-    if count > 1:
-        buf[first + 1] = 46  # "."
-    else:
-        pos -= 1
-    buf[pos] = 101  # "e"
-    buf[pos + 1] = 45 if exp10 < 0 else 43  # "-" or "+"
-    pos += 2
-    e = -exp10 if exp10 < 0 else exp10
-    width = 3 if e >= 100 else 2
-    for k in range(width - 1, -1, -1):
-        buf[pos + k] = 48 + e % 10
-        e //= 10
-    return pos + width
-
-
-@jit
-def _csv(bits):
+def _csv(bits, buf):
+    """Write the CSV rows of the doubles of IEEE ``bits`` (uint64, shape (rows, columns)) at the
+    start of ``buf`` (uint8, at least :func:`buffer_size` bytes); the bytes written, -1 (and
+    nothing written) when ``buf`` is too short."""
     rows, cols = bits.shape
-    buf = np.empty(rows * (cols * 25 + 2), dtype=np.uint8)
+    if len(buf) < rows * (cols * VALUE_BYTES + 2):
+        return -1
     pos = 0
     for r in range(rows):
         for c in range(cols):
-            if c:
-                buf[pos] = 44  # ","
-                pos += 1
             pos = _put_float(buf, pos, bits[r, c])
-        buf[pos] = 13
+            buf[pos] = 44  # ","
+            pos += 1
+        if cols:
+            pos -= 1  # the last comma gives way to the line end
+        buf[pos] = 13  # "\r\n"
         buf[pos + 1] = 10
         pos += 2
-    return buf[:pos]
+    return pos
+
+
+def _bits(table: np.ndarray) -> np.ndarray:
+    """``table`` as C-ordered doubles, viewed as their IEEE bits (uint64)."""
+    return np.ascontiguousarray(table, dtype=np.float64).view(np.uint64)
+
+
+def csv_into(table: np.ndarray, buf: np.ndarray) -> int:
+    """Write the CSV rows of ``table`` (see :func:`csv_bytes`) at the start of ``buf``.
+
+    For a writer that keeps one buffer for every batch of rows: no allocation, and the file
+    takes ``memoryview(buf)[:n]`` without a copy.
+
+    Parameters
+    ----------
+    table : ndarray, shape (rows, columns)
+    buf : ndarray of uint8, shape (at least ``buffer_size(rows, columns)``,)
+        C-contiguous.
+
+    Returns
+    -------
+    int
+        Bytes written, ``n``: the text is ``buf[:n]``.
+
+    Raises
+    ------
+    ValueError
+        ``buf`` is shorter than :func:`buffer_size`.
+    """
+    bits = _bits(table)
+    written = _csv(bits, buf)
+    if written < 0:
+        raise ValueError(f"CSV buffer of {len(buf)} bytes, {buffer_size(*bits.shape)} needed")
+    return written
 
 
 def csv_bytes(table: np.ndarray) -> bytes:
@@ -312,5 +399,6 @@ def csv_bytes(table: np.ndarray) -> bytes:
     bytes
         ASCII text.
     """
-    bits = np.ascontiguousarray(table, dtype=np.float64).view(np.uint64)
-    return _csv(bits).tobytes()
+    bits = _bits(table)
+    buf = np.empty(buffer_size(*bits.shape), dtype=np.uint8)
+    return buf[: _csv(bits, buf)].tobytes()

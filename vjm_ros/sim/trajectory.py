@@ -227,6 +227,10 @@ class CsvStream:
     stored since the last :meth:`catch_up` at each call; the file is the one
     :meth:`Trajectory.write_csv` writes at the end.
 
+    The compiled writer formats every batch into one buffer the stream keeps
+    (:func:`vjm_ros.sim.float_text.csv_into`), which the file takes as it is: no fresh memory
+    (and no page faults) per batch, no copy into ``bytes``.
+
     Parameters
     ----------
     trajectory : Trajectory
@@ -240,6 +244,7 @@ class CsvStream:
         self.trajectory = trajectory
         self.path = Path(path)
         self.written = 0
+        self._text = np.empty(0, dtype=np.uint8)
         self._fh = self.path.open("w", newline="")
         try:
             csv.writer(self._fh).writerow(trajectory.columns())
@@ -253,7 +258,15 @@ class CsvStream:
         total = len(self.trajectory)
         while self.written < total:
             stop = min(self.written + CSV_BATCH_ROWS, total)
-            self._fh.buffer.write(csv_bytes(self.trajectory.table(self.written, stop)))
+            table = self.trajectory.table(self.written, stop)
+            if _compiled_writer(len(table)):
+                size = float_text.buffer_size(*table.shape)
+                if len(self._text) < size:
+                    self._text = np.empty(size, dtype=np.uint8)
+                count = float_text.csv_into(table, self._text)
+                self._fh.buffer.write(memoryview(self._text)[:count])
+            else:
+                self._fh.buffer.write(_repr_bytes(table))
             self.written = stop
 
     def close(self) -> None:
@@ -264,6 +277,7 @@ class CsvStream:
             self.catch_up()
         finally:
             self._fh.close()
+            self._text = np.empty(0, dtype=np.uint8)
 
     def __enter__(self) -> CsvStream:
         return self
@@ -298,35 +312,53 @@ points start as plain Python (:mod:`vjm_ros.jit.tiers`): 500 rows of the thesis 
 few ms so, importing numba and loading the writer 0.3-0.4 s; a short run never imports numba."""
 
 
+def _writer_arguments() -> tuple[np.ndarray, np.ndarray]:
+    """Arguments of the types the compiled writer takes (``float_text._csv``): a table's bits
+    and the text buffer."""
+    return (np.zeros((1, 1), dtype=np.uint64),
+            np.zeros(float_text.buffer_size(1, 1), dtype=np.uint8))
+
+
 def prepare_csv_writer(rows: int) -> None:
     """Load the compiled CSV writer now (from numba's cache) if a table of ``rows`` rows would
     load it. ``vjm run`` does so before its clock starts: loading compiled code is start-up,
     which its ``wall_time`` leaves out (the block pipeline's loading too), and in the CSV's thread,
     competing with the physics and the logs for the interpreter, the load took some 150 ms of
     a fresh run's wall time with all three outputs, for 60-100 ms of loading alone."""
-    if float_text.COMPILED and (rows >= CSV_PLAIN_ROWS or not tiers.enabled()):
-        compiled = tiers.entry(float_text, "_csv")
-        if not compiled.ready:
-            compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
+    _compiled_writer(rows)
+
+
+def _compiled_writer(rows: int) -> bool:
+    """Whether the compiled writer formats a table of ``rows`` rows: once it is in use, or
+    loaded now for a table of :data:`CSV_PLAIN_ROWS` rows or more (with the tiers on; at once
+    with them off), unless numba is still compiling it in the background
+    (:mod:`vjm_ros.jit.tiers`)."""
+    if not float_text.COMPILED:
+        return False
+    compiled = tiers.entry(float_text, "_csv")
+    if not compiled.ready and (rows >= CSV_PLAIN_ROWS or not tiers.enabled()):
+        compiled.prepare(*_writer_arguments())
+    return compiled.ready
+
+
+def _repr_bytes(table: np.ndarray) -> bytes:
+    """The CSV rows of ``table`` from the nested list's ``repr``, split at ``"], ["`` and
+    ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
+    bracket or space): the compiled writer's text, without it."""
+    text = repr(np.asarray(table, dtype=float).tolist())
+    return (text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n").encode("ascii")
 
 
 def csv_bytes(table: np.ndarray) -> bytes:
     """CSV rows of ``table`` as ASCII bytes (see :func:`csv_rows`).
 
-    Compiled, :func:`vjm_ros.sim.float_text.csv_bytes` writes them (about six times faster,
-    without holding the GIL); else the nested list's ``repr`` is split at ``"], ["`` and
-    ``", "`` (float reprs such as ``1.5``, ``-0.0``, ``1e-05``, ``nan``, ``inf`` hold no comma,
-    bracket or space): the same text. The latter also while numba compiles the former in the
-    background (:mod:`vjm_ros.jit.tiers`), and for tables of fewer than
-    :data:`CSV_PLAIN_ROWS` rows before it is loaded.
+    Compiled, :func:`vjm_ros.sim.float_text.csv_bytes` writes them (without holding the GIL);
+    else :func:`_repr_bytes`, the same text: while numba compiles the former in the background
+    (:mod:`vjm_ros.jit.tiers`), and for tables of fewer than :data:`CSV_PLAIN_ROWS` rows before
+    it is loaded.
     """
     if len(table) == 0:
         return b""
-    if float_text.COMPILED:
-        compiled = tiers.entry(float_text, "_csv")
-        if not compiled.ready and (len(table) >= CSV_PLAIN_ROWS or not tiers.enabled()):
-            compiled.prepare(np.zeros((1, 1), dtype=np.uint64))
-        if compiled.ready:
-            return float_text.csv_bytes(table)
-    text = repr(np.asarray(table, dtype=float).tolist())
-    return (text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n").encode("ascii")
+    if _compiled_writer(len(table)):
+        return float_text.csv_bytes(table)
+    return _repr_bytes(table)
