@@ -120,3 +120,33 @@ def test_close_is_idempotent(run, tmp_path):
     with pytest.raises(ValueError, match="closed"):
         rec.write(samples[1])
     verify(path)
+
+
+def test_columns_are_the_ones_rerun_builds():
+    """The component columns built from whole arrays hold what rerun's archetype builders make
+    of the same numbers: descriptors, arrow types (the batches' fast path) and values."""
+    import rerun as rr
+
+    from vjm_ros.logs import rerun_recorder as rrec
+
+    rng = np.random.default_rng(3)
+    rows, n = 7, 3
+    segments, xy = rng.normal(size=(rows, n, 2, 2)), rng.normal(size=(rows, 2, 2))
+    values = rng.normal(size=(rows, 4))
+    flat = xy.reshape(-1, 2)
+    arrows = rr.Arrows2D.columns(origins=flat, vectors=flat).partition([2] * rows)
+    vectors = [c for c in arrows
+               if c.component_descriptor() == rr.Arrows2D.descriptor_vectors()]
+    pairs = [
+        (rrec._strips(segments),
+         rr.LineStrips2D.columns(strips=segments.reshape(-1, 2, 2)).partition([n] * rows)),
+        (rrec._points(xy), rr.Points2D.columns(positions=flat).partition([2] * rows)),
+        (rrec._points(xy, rr.Arrows2D.descriptor_vectors(), rr.components.Vector2DBatch),
+         vectors),
+        (rrec._scalars(values), rr.Scalars.columns(scalars=values)),
+        (rrec._scalars(values[:, :0]), rr.Scalars.columns(scalars=values[:, :0])),  # no closure
+    ]
+    for ours, (theirs,) in pairs:
+        assert ours.component_descriptor() == theirs.component_descriptor()
+        assert ours.as_arrow_array().type == theirs.as_arrow_array().type
+        assert ours.as_arrow_array().equals(theirs.as_arrow_array())
