@@ -106,10 +106,8 @@ def _vec2(xy: np.ndarray) -> pa.FixedSizeListArray:
 
 def _column(descriptor: rr.ComponentDescriptor, batch: type, values: pa.Array,
             rows: int) -> rr.ComponentColumn:
-    """A component column of ``rows`` times, each with an equal share of ``values``.
-
-    What the archetypes' ``columns(...).partition(...)`` send, built from whole arrays (no
-    Python loop per row or per strip).
+    """A component column of ``rows`` times, each with an equal share of ``values``: what the
+    archetypes' ``columns(...).partition(...)`` make, without a Python loop per row or strip.
 
     Parameters
     ----------
@@ -254,7 +252,9 @@ class RerunRecorder(Recorder):
         self._connect(target, default_blueprint(model, self.measured))
         self._log_static(scene_text or model.source_text)
         self.rec.flush(timeout_sec=0.0)  # the static entities go out while the run is set up
-        self._allocate()
+        self._allocate_series()
+        self._geo: list[tuple] = []  # (times, segments, points, closure points, forces)
+        self._cyc: list[tuple] = []  # (times, segments)
         self._last_send = time.monotonic()
         self._next_cyclograph_ns = 0
 
@@ -305,11 +305,6 @@ class RerunRecorder(Recorder):
                    for entity in (MEASURED if self.measured else ())]
         for entity, archetype in static:
             log(entity, archetype, static=True)
-
-    def _allocate(self) -> None:
-        self._allocate_series()
-        self._geo: list[tuple] = []  # (times, segments, points, closure points, forces)
-        self._cyc: list[tuple] = []  # (times, segments)
 
     def _allocate_series(self) -> None:
         """Fresh buffers of the series (the sent ones belong to rerun)."""
