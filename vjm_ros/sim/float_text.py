@@ -9,14 +9,17 @@ power of five and the interval of the double), compiled. test/test_trajectory_cs
 ``repr`` on millions of random bit patterns and the edge cases.
 
 Cost, the four-bar's trajectory (10 001 rows x 25 doubles, rk4, exact closure) on a 2-core
-AMD EPYC VM at 2.45 GHz, with other work running, best of 36 passes, in one process with the
-writer before: about 36 ns per value (57 before), 9 ms for the CSV of a 10 s run at 1 kHz,
-without holding the GIL. Ryu's digits take some 22 ns of it; the text is written 17 digits at
-a time (the shortest digits left-aligned, as two 8-digit words of ASCII, each made at once by
-multiplications and stored whole) and placed by the position of the point, without a loop but
-for the integer part; one 64 x 128-bit product gives the value and both ends of its interval
-(Ryu's ``mulShiftAll64``), where three were made before. :class:`~vjm_ros.sim.trajectory.CsvStream`
-has each batch written into a buffer it keeps (:func:`csv_into`).
+AMD EPYC VM at 2.45 GHz with other work running, best of 36 passes, in one process with the
+writer before: about 29 ns per value into a kept buffer (:func:`csv_into`), 30 ns for
+:func:`csv_bytes` (57 ns before), 7.5 ms for the CSV of a 10 s run at 1 kHz, without holding
+the GIL. Ryu's digits take some 17 ns of it: the power of five, the shift and the decimal
+exponent are looked up by the double's exponent (:data:`EXP_MUL`, :data:`EXP_INT`; computing
+them put a chain of products before the first multiplication), and one 64 x 128-bit product
+gives the value and both ends of its interval (Ryu's ``mulShiftAll64``; three products
+before). The text takes some 10 ns (about 35 before, with a fresh buffer per batch): the
+shortest digits left-aligned to 17, made into two 8-digit words of ASCII at once by
+multiplications, stored whole, and placed by the position of the point, every byte stored
+through an unsigned index (no check for a negative one).
 """
 
 from __future__ import annotations
@@ -50,6 +53,32 @@ def _tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 POW5_SPLIT, POW5_INV_SPLIT = _tables()
+
+
+def _by_exponent() -> tuple[np.ndarray, np.ndarray]:
+    """Ryu's factor and shift for each biased exponent of a double, looked up rather than
+    computed: the power of five (``2^k / 5^q`` for ``e2 >= 0``, else ``5^i``) as (low, high)
+    words, shape (2047, 2); the shift ``j``, the decimal exponent and ``q``, shape (2047, 3).
+    The digits' first product then waits for one load, not for a chain of products."""
+    mul = np.zeros((2047, 2), dtype=np.uint64)
+    ints = np.zeros((2047, 3), dtype=np.int16)
+    for exponent in range(2047):
+        e2 = max(exponent, 1) - 1023 - 52 - 2
+        if e2 >= 0:
+            q = ((e2 * 78913) >> 18) - (1 if e2 > 3 else 0)
+            k = _POW5_INV_BITCOUNT + ((q * 1217359) >> 19)
+            mul[exponent] = POW5_INV_SPLIT[q]
+            ints[exponent] = (-e2 + q + k, q, q)
+        else:
+            q = ((-e2 * 732923) >> 20) - (1 if -e2 > 1 else 0)
+            i = -e2 - q
+            k = ((i * 1217359) >> 19) + 1 - _POW5_BITCOUNT
+            mul[exponent] = POW5_SPLIT[i]
+            ints[exponent] = (q - k, q + e2, q)
+    return mul, ints
+
+
+EXP_MUL, EXP_INT = _by_exponent()
 POW10 = np.array([10**k for k in range(20)], dtype=np.uint64)
 
 _U32 = np.uint64(0xFFFFFFFF)
@@ -138,12 +167,10 @@ def _shortest(mantissa, exponent):
     mv = np.uint64(4) * m2
     mm_shift = mantissa != 0 or exponent <= 1
     vm_trailing, vr_trailing = False, False
+    vr, vp, vm = _mul_shift_all(m2, EXP_MUL[exponent, 0], EXP_MUL[exponent, 1],
+                                np.int64(EXP_INT[exponent, 0]), mm_shift)
+    e10, q = np.int64(EXP_INT[exponent, 1]), np.int64(EXP_INT[exponent, 2])
     if e2 >= 0:
-        q = ((e2 * 78913) >> 18) - (1 if e2 > 3 else 0)
-        e10 = q
-        k = _POW5_INV_BITCOUNT + ((q * 1217359) >> 19) + 1 - 1
-        vr, vp, vm = _mul_shift_all(m2, POW5_INV_SPLIT[q, 0], POW5_INV_SPLIT[q, 1],
-                                    -e2 + q + k, mm_shift)
         if q <= 21:
             if mv % _FIVE == 0:
                 vr_trailing = _pow5_factor(mv) >= q
@@ -151,20 +178,14 @@ def _shortest(mantissa, exponent):
                 vm_trailing = _pow5_factor(mv - _ONE - (_ONE if mm_shift else _ZERO)) >= q
             elif _pow5_factor(mv + _TWO) >= q:
                 vp -= _ONE
-    else:
-        q = ((-e2 * 732923) >> 20) - (1 if -e2 > 1 else 0)
-        e10 = q + e2
-        i = -e2 - q
-        k = ((i * 1217359) >> 19) + 1 - _POW5_BITCOUNT
-        vr, vp, vm = _mul_shift_all(m2, POW5_SPLIT[i, 0], POW5_SPLIT[i, 1], q - k, mm_shift)
-        if q <= 1:
-            vr_trailing = True
-            if accept_bounds:
-                vm_trailing = mm_shift
-            else:
-                vp -= _ONE
-        elif q < 63:
-            vr_trailing = (mv & ((_ONE << np.uint64(q)) - _ONE)) == 0
+    elif q <= 1:
+        vr_trailing = True
+        if accept_bounds:
+            vm_trailing = mm_shift
+        else:
+            vp -= _ONE
+    elif q < 63:
+        vr_trailing = (mv & ((_ONE << np.uint64(q)) - _ONE)) == 0
     removed, last = 0, _ZERO
     if vm_trailing or vr_trailing:
         while vp // _TEN > vm // _TEN:
@@ -203,6 +224,13 @@ def _shortest(mantissa, exponent):
 
 
 @jit(allocates=False, inline="always")
+def _put(buf, pos, byte):
+    """``buf[pos] = byte`` through an unsigned index: no check for a negative one (some 10 of
+    them per value otherwise)."""
+    buf[np.uint64(pos)] = byte
+
+
+@jit(allocates=False, inline="always")
 def _eight(x):
     """The 8 decimal digits of ``x`` (uint64 < 10^8) as ASCII bytes in one uint64, the first
     digit in the lowest byte (two 4-digit halves, then 2-digit and 1-digit lanes at once)."""
@@ -228,7 +256,7 @@ def _put17(buf, pos, v):
     """Write the 17 digits of ``v`` (< 10^17, leading zeros included) at ``buf[pos:]``."""
     hi = v // _E8
     top = hi // _E8
-    buf[pos] = np.uint8(48 + top)
+    _put(buf, pos, np.uint8(48 + top))
     _store8(buf, pos + 1, _eight(hi - top * _E8))
     _store8(buf, pos + 9, _eight(v - hi * _E8))
 
@@ -249,26 +277,26 @@ def _put_float(buf, pos, bits):
     """Write the double of IEEE ``bits`` as ``repr`` does at ``buf[pos:]``; the end position.
     Writes up to 24 bytes past ``pos`` (digits past the end position included)."""
     if bits >> _SIGN:
-        buf[pos] = 45  # "-"
+        _put(buf, pos, 45)  # "-"
         pos += 1
     magnitude = bits & _ABS
     if magnitude == 0:
-        buf[pos] = 48  # "0.0"
-        buf[pos + 1] = 46
-        buf[pos + 2] = 48
+        _put(buf, pos, 48)  # "0.0"
+        _put(buf, pos + 1, 46)
+        _put(buf, pos + 2, 48)
         return pos + 3
     exponent = np.int64(magnitude >> np.uint64(52))
     mantissa = magnitude & _MANTISSA
     if exponent == 0x7FF:
         if mantissa != 0:
             pos -= np.int64(bits >> _SIGN)  # no sign
-            buf[pos] = 110  # "nan"
-            buf[pos + 1] = 97
-            buf[pos + 2] = 110
+            _put(buf, pos, 110)  # "nan"
+            _put(buf, pos + 1, 97)
+            _put(buf, pos + 2, 110)
         else:
-            buf[pos] = 105  # "inf"
-            buf[pos + 1] = 110
-            buf[pos + 2] = 102
+            _put(buf, pos, 105)  # "inf"
+            _put(buf, pos + 1, 110)
+            _put(buf, pos + 2, 102)
         return pos + 3
     digits, e10 = _shortest(mantissa, exponent)
     count = _decimal_length(digits)
@@ -276,38 +304,38 @@ def _put_float(buf, pos, bits):
     aligned = digits * POW10[17 - count]  # the digits, then zeros: 17 of them
     if point <= -4 or point > 16:  # scientific: d.ddde-XX
         _put17(buf, pos + 1, aligned)
-        buf[pos] = buf[pos + 1]
-        buf[pos + 1] = 46  # "."
+        _put(buf, pos, buf[np.uint64(pos + 1)])
+        _put(buf, pos + 1, 46)  # "."
         pos += count + 1 if count > 1 else 1
         exp10 = point - 1
-        buf[pos] = 101  # "e"
-        buf[pos + 1] = 45 if exp10 < 0 else 43  # "-" or "+"
+        _put(buf, pos, 101)  # "e"
+        _put(buf, pos + 1, 45 if exp10 < 0 else 43)  # "-" or "+"
         e = -exp10 if exp10 < 0 else exp10
         if e >= 100:
-            buf[pos + 2] = 48 + e // 100
+            _put(buf, pos + 2, 48 + e // 100)
             pos += 1
             e %= 100
-        buf[pos + 2] = 48 + e // 10
-        buf[pos + 3] = 48 + e % 10
+        _put(buf, pos + 2, 48 + e // 10)
+        _put(buf, pos + 3, 48 + e % 10)
         return pos + 4
     if point <= 0:  # 0.000ddd
-        buf[pos] = 48
-        buf[pos + 1] = 46
-        buf[pos + 2] = 48
-        buf[pos + 3] = 48
-        buf[pos + 4] = 48
+        _put(buf, pos, 48)
+        _put(buf, pos + 1, 46)
+        _put(buf, pos + 2, 48)
+        _put(buf, pos + 3, 48)
+        _put(buf, pos + 4, 48)
         pos += 2 - point
         _put17(buf, pos, aligned)
         return pos + count
     if point >= count:  # an integer: the digits, zeros up to the point, ".0"
         _put17(buf, pos, aligned)
-        buf[pos + point] = 46
-        buf[pos + point + 1] = 48
+        _put(buf, pos + point, 46)
+        _put(buf, pos + point + 1, 48)
         return pos + point + 2
     _put17(buf, pos + 1, aligned)  # then the integer part moves left by one
     for k in range(point):
-        buf[pos + k] = buf[pos + k + 1]
-    buf[pos + point] = 46
+        _put(buf, pos + k, buf[np.uint64(pos + k + 1)])
+    _put(buf, pos + point, 46)
     return pos + count + 1
 
 
@@ -343,12 +371,12 @@ def _csv(bits, buf):
     for r in range(rows):
         for c in range(cols):
             pos = _put_float(buf, pos, bits[r, c])
-            buf[pos] = 44  # ","
+            _put(buf, pos, 44)  # ","
             pos += 1
         if cols:
             pos -= 1  # the last comma gives way to the line end
-        buf[pos] = 13  # "\r\n"
-        buf[pos + 1] = 10
+        _put(buf, pos, 13)  # "\r\n"
+        _put(buf, pos + 1, 10)
         pos += 2
     return pos
 
