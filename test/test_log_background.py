@@ -163,6 +163,32 @@ def test_consumers_run_in_threads_of_their_own():
     assert names == {"vjm-x"}
 
 
+def _priority() -> int:
+    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
+def test_consumers_and_the_threads_they_start_run_at_a_lower_priority():
+    from vjm_ros.logs import background
+
+    caller = _priority()
+    seen = {}
+
+    def start():
+        seen["start"] = _priority()
+        child = threading.Thread(target=lambda: seen.setdefault("child", _priority()))
+        child.start()
+        child.join()
+
+    with BlockFanOut(Box, [Consumer("vjm-x", lambda b: seen.setdefault("write", _priority()),
+                                    start=start)]) as fan:
+        fan.put(fan.take())
+    lowered = min(caller + background.NICENESS, 19)
+    assert lowered > caller or caller == 19
+    assert seen == {"start": lowered, "child": lowered, "write": lowered}
+    assert _priority() == caller  # the physics' thread keeps its priority
+
+
 # ---------------------------------------------------------------- vjm run
 def row_by_row_csv(scene_name: str, ticks: int) -> bytes:
     """The oracle: the run simulated tick by tick, one ``csv.writer`` row per sample."""
