@@ -107,6 +107,28 @@ def test_mcap_blocks_write_the_same_file(run, tmp_path, monkeypatch, marker_ever
     assert (tmp_path / "blocks" / "run.mcap").read_bytes() == by_samples
 
 
+def test_after_reserve_mcap_blocks_write_into_the_same_memory(run, tmp_path):
+    """``reserve`` sizes the encoder's and the chunk's buffers for the run's blocks (markers
+    included, laid out from the first sample): writing the blocks then replaces none of them,
+    so no memory is mapped and cleared mid-run. Without ``reserve`` the first block does."""
+    scene, sim, first, blocks = run
+
+    def buffers(rec) -> list:
+        return [rec._block_encoder._table, rec._block_encoder._out, rec._writer._builder.buffer]
+
+    for reserved in (True, False):
+        with McapRecorder(tmp_path / f"{reserved}.mcap", scene.model, sim.describe(),
+                          scene.text, chunk_seconds=1.0) as rec:
+            rec.write(first)
+            if reserved:
+                rec.reserve(max(BLOCKS))
+            held = buffers(rec)
+            for block in blocks:
+                rec.write_block(block)
+            kept = [now is before for now, before in zip(buffers(rec), held, strict=True)]
+        assert kept == [reserved] * 3
+
+
 # ---------------------------------------------------------------- rerun
 def rrd_chunks(path: Path) -> list[tuple]:
     """Every temporal chunk of a recording as (entity, times, {component: values}), in order."""

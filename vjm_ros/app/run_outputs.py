@@ -101,6 +101,7 @@ class RunOutputs:
         self._first = first
         self._csv_path = csv_path
         self._csv: CsvStream | None = None
+        self._block_ticks = block_ticks
         consumers = [Consumer("vjm-trajectory", self._extend, self._close_csv)]
         consumers += [self._log_consumer(key, opener) for key, opener in openers]
         self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers, depth=8)
@@ -152,6 +153,7 @@ class RunOutputs:
             self.recorders[key] = rec
             logs.active.append(rec)
             logs.write_to(rec, self._first)
+            rec.reserve(self._block_ticks)
 
         return Consumer(f"vjm-log {key}", lambda block: logs.write_block_to(slot[0], block),
                         lambda: logs.close_one(slot[0]), start)

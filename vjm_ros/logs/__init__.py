@@ -74,6 +74,12 @@ class Recorder:
         """Write what is pending and release the sink (called once by :meth:`close`)."""
         raise NotImplementedError
 
+    def reserve(self, block_ticks: int) -> None:
+        """Make ready, now, the memory that writing blocks of ``block_ticks`` rows will use
+        (``vjm run`` calls it as the log opens, before the run's clock starts). Without it the
+        first blocks allocate that memory, and the operating system maps and clears its pages
+        while the physics runs."""
+
     def _reset_event(self, t: float | None, tick: float | None) -> tuple[int, str]:
         """Start a new episode of ``self.timebase`` (:meth:`Timebase.reset`); its start, ns,
         and the reset event's text (:func:`~vjm_ros.logs.events.reset_line`)."""

@@ -100,6 +100,14 @@ class BlockChunkBuilder(ChunkBuilder):
         memoryview(self.buffer)[self.size : end] = data
         self.size = end
 
+    def reserve(self, size: int) -> None:
+        """Hold at least ``size`` bytes of records without growing (the buffer's pages are
+        written once, now)."""
+        if size > len(self.buffer):
+            grown = bytearray(size)  # zero-filled: every page mapped here
+            grown[: self.size] = memoryview(self.buffer)[: self.size]
+            self.buffer = grown
+
     def _take_records(self) -> None:
         """Move what the records writer holds (schemas, channels, single messages) to the
         buffer."""
@@ -197,6 +205,10 @@ class BlockWriter(Writer):
         stats.message_count += added
         self._builder.add_run(data, times, starts, columns, markers)
         self._Writer__maybe_finalize_chunk()
+
+    def reserve(self, size: int) -> None:
+        """Let the open chunk hold ``size`` bytes of records without growing."""
+        self._builder.reserve(size)
 
     def _Writer__finalize_chunk(self) -> None:  # noqa: N802 - the writer's private name
         """The writer's ``__finalize_chunk`` with zstd at :attr:`zstd_level`: the chunk record,
@@ -349,6 +361,24 @@ class BlockEncoder:
         self._table = np.empty(0, dtype=np.uint8)
         self._out = np.empty(0, dtype=np.uint8)
 
+    def block_bytes(self, rows: int) -> int:
+        """Bytes of the records of a block of ``rows`` ticks, markers included (an upper bound
+        before the first markers are laid out: each as large as a tick's other records)."""
+        marker = len(self.markers.image) if self.markers is not None else len(self.image)
+        marked = -(-rows // self.marker_every) + 1 if self.marker_every > 0 else 0
+        return rows * len(self.image) + marked * marker
+
+    def reserve(self, rows: int) -> None:
+        """Buffers for blocks of ``rows`` ticks, their pages touched now."""
+        size = rows * len(self.image)
+        if len(self._table) < size:
+            self._table = np.zeros(size, dtype=np.uint8)
+            self._table.fill(0)  # np.zeros maps its pages only when first written
+        total = self.block_bytes(rows)
+        if len(self._out) < total:
+            self._out = np.zeros(total, dtype=np.uint8)
+            self._out.fill(0)
+
     def _values(self, block, rows: int) -> list[list[np.ndarray]]:
         """The float64 runs of each per-tick record, in the order of :attr:`kinds`."""
         force = block.force[:rows]
@@ -383,8 +413,8 @@ class BlockEncoder:
         seq = (first + np.arange(rows)) & 0xFFFFFFFF
         sec, nsec = np.divmod(ns, NS_PER_S)
         size = len(self.image)
-        table = self._table = _at_least(self._table, rows * size).reshape(-1)[: rows * size]
-        table = table.reshape(rows, size)
+        self._table = _at_least(self._table, rows * size)
+        table = self._table[: rows * size].reshape(rows, size)
         table[:] = self.image
         for kind, start, values in zip(self.kinds, self.starts, self._values(block, rows),
                                        strict=False):
@@ -421,12 +451,17 @@ class BlockEncoder:
         return EncodedBlock(out[: int(tick_starts[-1])], ns, tick_starts, self.columns,
                             self.marker_channel, marked, size)
 
+    def lay_out_markers(self, markers) -> None:
+        """Take the markers' byte layout from one markers message of the model (the first
+        one: every tick's has the same layout)."""
+        if self.markers is None and self.marker_channel is not None:
+            self.markers = _Kind(self.marker_channel, cdr.markers_layout(markers))
+
     def _marker_rows(self, block, marked, seq, ns, sec, nsec) -> np.ndarray:
         """Records of the markers at ticks ``marked`` (G, record size)."""
         if self.markers is None:
             sample = block.sample(int(marked[0]))
-            layout = cdr.markers_layout(messages.markers(sample, 0, self.force_scale))
-            self.markers = _Kind(self.marker_channel, layout)
+            self.lay_out_markers(messages.markers(sample, 0, self.force_scale))
         kind = self.markers
         mrows = np.empty((len(marked), len(kind.image)), dtype=np.uint8)
         mrows[:] = kind.image

@@ -274,6 +274,7 @@ class McapRecorder(Recorder):
         if self.marker_every > 0 and self.samples % self.marker_every == 0:
             markers = messages.markers(sample, ns)
             self._put(self._channels[self.topics.markers], cdr.encode_markers(markers), ns)
+            self._block_encoder.lay_out_markers(markers)
         self.samples += 1
         self._maybe_flush(ns)
 
@@ -302,6 +303,12 @@ class McapRecorder(Recorder):
         if self._chunk_start_ns is not None and (
                 time.monotonic() - self._chunk_wall >= self.chunk_seconds):
             self.flush()
+
+    def reserve(self, block_ticks: int) -> None:
+        """Buffers of the block encoder and of the chunks, sized for blocks of ``block_ticks``
+        rows and their pages touched (see :meth:`Recorder.reserve`)."""
+        self._block_encoder.reserve(block_ticks)
+        self._writer.reserve(CHUNK_BYTES + self._block_encoder.block_bytes(block_ticks))
 
     def _chunk_stop(self, ns: np.ndarray, start: int) -> tuple[int, bool]:
         """End (exclusive) of the ticks from ``start`` that go into the open chunk, and whether

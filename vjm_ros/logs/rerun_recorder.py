@@ -306,6 +306,13 @@ class RerunRecorder(Recorder):
         for entity, archetype in static:
             log(entity, archetype, static=True)
 
+    def reserve(self, block_ticks: int) -> None:
+        """Touch the pages of the series' buffers now (see :meth:`Recorder.reserve`)."""
+        for buffer in (self._t, self._q, self._qd, self._force, self._energy, self._error,
+                       self._measured):
+            if buffer is not None:
+                buffer.fill(0)
+
     def _allocate_series(self) -> None:
         """Fresh buffers of the series (the sent ones belong to rerun)."""
         b, n, k = self.batch, self.model.n, len(self.model.closures)
