@@ -182,7 +182,7 @@ PARTS = (
     ("mcap: finalize file", "logs/mcap_recorder.py", "_finalize"),
     ("rrd: open", "logs/rerun_recorder.py", "__init__"),
     ("rrd: buffer blocks", "logs/rerun_recorder.py", "write_block"),
-    ("rrd: send columns (also at finalize)", "logs/rerun_recorder.py", "send"),
+    ("rrd: send chunks (also at finalize)", "logs/rerun_recorder.py", "send"),
     ("rrd: finalize file", "logs/rerun_recorder.py", "_finalize"),
 )
 """Parts of the *all* run: label, file (path suffix; ``~`` for a built-in) and function whose
@@ -300,14 +300,15 @@ def render_section(r: dict) -> str:
         "- The CSV holds every value as Python's `repr` writes it (the shortest text that reads "
         "back to the same double), formatted by compiled code (Ryu's shortest digits); the file "
         "is byte-identical to the one written row by row. MCAP messages are built a block of "
-        "ticks at a time from byte images of each topic and compressed per chunk (zstd level -3), "
-        "the records those of the file written message by message; rerun receives columns "
-        "(`send_columns`) every 5000 ticks.",
+        "ticks at a time from byte images of each topic, in buffers kept for the whole file, "
+        "and compressed per chunk (zstd level -3), the records those of the file written "
+        "message by message; rerun receives arrow columns built from whole arrays, one chunk "
+        "per entity in one `send_chunks` every 5000 ticks.",
         "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
         "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
         "blocks in a thread of their own (opening their files there while the compiled "
-        "pipeline loads), so on two cores the logs are written while the next blocks are "
-        "computed. The wall time then depends on "
+        "pipeline loads) at a lower scheduling priority than the physics, so on two cores the "
+        "logs are written while the next blocks are computed. The wall time then depends on "
         "what else the machine runs: with the second core busy, the logs' CPU adds up with the "
         f"physics (1-minute load average when measured: {r.get('load', 'not recorded')}). "
         "On two free cores a run takes at least half its CPU time: with all three logs "
