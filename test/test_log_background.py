@@ -229,6 +229,34 @@ def test_vjm_run_writes_the_csv_of_the_ticks_one_by_one_with_every_log(tmp_path)
     assert (out / "trajectory.csv").read_bytes() == row_by_row_csv("four_bar", 437)
 
 
+def test_a_signal_while_the_run_starts_up_stops_it_before_its_first_tick(tmp_path, monkeypatch,
+                                                                        capsys):
+    """SIGINT while the scene loads (before the run's own handling, where Python's default
+    handler raised a KeyboardInterrupt that numba's cache loading could swallow): the run
+    stops before its first tick with 130, its MCAP log finalized (read back by the ``mcap``
+    reader) with the first sample only."""
+    from mcap.reader import make_reader
+
+    from vjm_ros.app import cli
+    from vjm_ros.scene import loader
+
+    load = loader.load_scene
+
+    def load_and_interrupt(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return load(*args, **kwargs)
+
+    monkeypatch.setattr(loader, "load_scene", load_and_interrupt)
+    mcap = tmp_path / "run.mcap"
+    code = cli.main(["run", "four_bar", "--duration", "600", "--mcap", str(mcap), "--json"])
+    assert code == 130
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["steps"] == 0 and summary["error"] == "interrupted by signal 2"
+    with open(mcap, "rb") as f:
+        clock = [m for _, ch, m in make_reader(f).iter_messages() if ch.topic == "/clock"]
+    assert len(clock) == 1 and clock[0].log_time == 0
+
+
 def test_a_log_that_cannot_be_opened_stops_the_run_before_any_output(tmp_path, monkeypatch):
     from mcap.reader import make_reader
 

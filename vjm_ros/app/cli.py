@@ -258,6 +258,15 @@ def _tell_compiling(sim) -> bool:
 
 
 def _cmd_run(args) -> int:
+    # A signal while the scene and the compiled code load is a request to stop, as later in the
+    # run: with Python's default handler, the KeyboardInterrupt could be raised inside numba's
+    # cache loading (a ctypes callback), which swallowed it, and the run went on.
+    with StopSignals() as startup:
+        return _run(args, startup)
+
+
+def _run(args, startup: StopSignals) -> int:
+    """``vjm run``; ``startup`` holds a signal that came before the run's own handling."""
     from vjm_ros.app.run_outputs import preload_libraries
 
     wanted = [key for key, on in (("csv", args.out), ("mcap", args.mcap or args.bag),
@@ -302,6 +311,7 @@ def _cmd_run(args) -> int:
         preloading.join()
     wall0, loading0 = time.perf_counter(), tiers.loading_seconds()  # set again at the first tick
     with StopSignals() as stop:
+        stop.code = startup.code  # a signal during start-up: no tick, every log finalized
         try:
             openers = _log_openers(args, scene, sim, duration)
             first = sim.sample()
