@@ -189,6 +189,31 @@ def test_consumers_and_the_threads_they_start_run_at_a_lower_priority():
     assert _priority() == caller  # the physics' thread keeps its priority
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread policies are Linux's")
+def test_consumers_of_a_realtime_thread_return_to_normal_scheduling():
+    """The node's tick loop may run under SCHED_FIFO (``realtime_priority``) and starts the log
+    thread: that thread must not inherit the real-time policy, where its nice is ignored."""
+    seen = {}
+
+    def run():
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        except OSError:
+            seen["refused"] = True
+            return
+        with BlockFanOut(Box, [Consumer("vjm-x", lambda b: seen.setdefault(
+                "consumer", os.sched_getscheduler(0)))]) as fan:
+            fan.put(fan.take())
+        seen["caller"] = os.sched_getscheduler(0)
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join()
+    if seen.get("refused"):
+        pytest.skip("SCHED_FIFO not permitted here")
+    assert seen == {"consumer": os.SCHED_OTHER, "caller": os.SCHED_FIFO}
+
+
 # ---------------------------------------------------------------- vjm run
 def row_by_row_csv(scene_name: str, ticks: int) -> bytes:
     """The oracle: the run simulated tick by tick, one ``csv.writer`` row per sample."""

@@ -57,11 +57,15 @@ against 59.4 ms at 0 (32.6 ms without outputs)."""
 def lower_priority(niceness: int) -> None:
     """Lower the calling thread's scheduling priority by ``niceness`` (Linux, where each thread
     has its own ``nice`` value; elsewhere, where it would apply to the whole process, and where
-    the system refuses, nothing happens)."""
+    the system refuses, nothing happens). A thread started by a real-time one (the node's tick
+    loop at ``realtime_priority``) inherits its SCHED_FIFO, where ``nice`` means nothing: it goes
+    back to normal scheduling first."""
     if niceness <= 0 or not sys.platform.startswith("linux"):
         return
     tid = threading.get_native_id()
     try:
+        if os.sched_getscheduler(0) != os.SCHED_OTHER:  # 0: the calling thread
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid)
                                                  + niceness, 19))
     except OSError:
