@@ -21,7 +21,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from vjm_ros.ros import conversions as conv
+from benchmarks import ros_messages as conv
+from vjm_ros.ros.conversions import stamp, wrench_topic
 from vjm_ros.ros.node import NODE_NAME
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
@@ -58,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         ]
         for closure, force in zip(model.closures, sample.closure_force, strict=True):
             pubs.append((node.create_publisher(
-                type(conv.wrench(force, sample.t)), conv.wrench_topic(closure.name), 10),
+                type(conv.wrench(force, sample.t)), wrench_topic(closure.name), 10),
                 conv.wrench(force, sample.t)))
         deadline = time.monotonic() + args.wait
         while time.monotonic() < deadline and not all(
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                   for _, msg in pubs]
         wall0, cpu0 = time.perf_counter(), time.process_time()
         for tick in range(args.ticks):
-            t = conv.stamp(tick * sim.dt)
+            t = stamp(tick * sim.dt)
             for (pub, msg), (_, header) in zip(pubs, stamps, strict=True):
                 if isinstance(msg, Clock):
                     msg.clock = t

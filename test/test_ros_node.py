@@ -198,8 +198,9 @@ def fill(msg, values):
 
 
 def test_live_messages_equal_the_logged_ones():
+    from benchmarks import ros_messages as conv
     from vjm_ros.logs import messages as log
-    from vjm_ros.ros import conversions as conv
+    from vjm_ros.ros.conversions import wrench_topic
 
     sim = plain_simulator("five_bar")
     for _ in range(37):
@@ -217,7 +218,7 @@ def test_live_messages_equal_the_logged_ones():
     assert conv.wrench(s.closure_force[0], s.t) == fill(WrenchStamped(), log.wrench(s, 0, ns))
     assert conv.clock(s.t) == fill(Clock(), log.clock(ns))
     assert conv.markers(s, s.t) == fill(MarkerArray(), log.markers(s, ns))
-    assert conv.wrench_topic("pin") == "~" + log.Topics().wrench("pin")[len(NODE):]
+    assert wrench_topic("pin") == "~" + log.Topics().wrench("pin")[len(NODE):]
 
 
 # ---------------------------------------------------------------- rates and stamps

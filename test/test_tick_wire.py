@@ -1,7 +1,7 @@
 """Serialized per-tick messages (ros/wire.py) read back as the messages built from scratch.
 
 Oracle: rclpy's own deserializer applied to the refilled bytes, against the conversion functions
-that build each message fresh (ros/conversions.py); no node is started (the node tests read the
+that build each message fresh (benchmarks/ros_messages.py); no node is started (the node tests read the
 published topics with real rclpy subscribers). The comparison runs over consecutive ticks of a
 real run, so a refill that left a field of the previous tick behind would show.
 """
@@ -15,7 +15,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from vjm_ros.ros import conversions as conv
+from benchmarks import ros_messages as conv
+from vjm_ros.ros.conversions import TipTrace
 from vjm_ros.ros.wire import TickWire
 from vjm_ros.scene.loader import load_scene
 from vjm_ros.sim.settings import SimulationSettings
@@ -88,7 +89,7 @@ def test_refilled_markers_read_back_as_fresh_markers(scene_name):
     if model.actuators:
         sim.set_efforts([a.effort for a in model.actuators])
     wire = MarkerWire()
-    trace = conv.TipTrace(len(model.chains), length=6, spacing=0.002)
+    trace = TipTrace(len(model.chains), length=6, spacing=0.002)
     layouts = set()
     checked = 0
     for episode in range(2):
@@ -113,7 +114,7 @@ def test_refilled_markers_read_back_as_fresh_markers(scene_name):
 
 
 def test_tip_trace_keeps_the_last_positions_oldest_first():
-    """The ring of :class:`conv.TipTrace`: the first position fills the strip, later ones push
+    """The ring of :class:`TipTrace`: the first position fills the strip, later ones push
     the oldest out, a reset (time going back) starts over."""
     import numpy as np
 
@@ -121,7 +122,7 @@ def test_tip_trace_keeps_the_last_positions_oldest_first():
         def __init__(self, t, x):
             self.t, self.points = t, np.array([[x, -x]])
 
-    trace = conv.TipTrace(1, length=4, spacing=1.0)
+    trace = TipTrace(1, length=4, spacing=1.0)
     assert trace.strips()[0].shape == (0, 2)
     trace.add(_S(0.0, 1.0))
     np.testing.assert_array_equal(trace.strips()[0][:, 0], [1, 1, 1, 1])
