@@ -6,20 +6,23 @@ import math
 import numpy as np
 import pytest
 
+from vjm_ros.scene.generated import chain_scene, star_scene
 from vjm_ros.scene.loader import load_scene
-from vjm_ros.studies import bench, compare_mujoco
-from vjm_ros.studies.bench import (
+from vjm_ros.studies import compare_mujoco
+from vjm_ros.studies.bench.analysis import pareto_front, recommend
+from vjm_ros.studies.bench.cli import main
+from vjm_ros.studies.bench.grid import (
     EXACT,
+    REFUSED,
     THESIS,
+    TIERS,
     BenchOptions,
     ClosureVariant,
     Grid,
-    RowResult,
-    main,
-    pareto_front,
-    recommend,
-    run_bench,
+    full_grid,
 )
+from vjm_ros.studies.bench.runs import RowResult, compute_reference
+from vjm_ros.studies.bench.study import horizon_for, run_bench
 
 
 def test_quick_cli_on_a_tiny_horizon(tmp_path):
@@ -46,7 +49,7 @@ def test_quick_cli_on_a_tiny_horizon(tmp_path):
     assert (docs.parent / "figures" / "four_bar_pareto.png").exists()
     text = docs.read_text()
     assert "## Recommended settings" in text and "figures/four_bar_pareto.png" in text
-    assert set(results["recommended"]) == {t for t, _ in bench.TIERS}
+    assert set(results["recommended"]) == {t for t, _ in TIERS}
     again, docs2 = tmp_path / "again", tmp_path / "docs2" / "accuracy.md"
     assert main(["--from-results", str(out / "results.json"), "--out", str(again), "--docs",
                  str(docs2)]) == 0
@@ -91,7 +94,7 @@ def test_pareto_front_and_tiers():
     rows = [_row(0.1, 1e-2, label="a"), _row(0.2, 1e-2, label="b"), _row(0.3, 1e-4, label="c"),
             _row(0.4, 1e-7, rate=250.0, step=4e-3, label="d"), _row(2.0, 1e-10, label="e")]
     rows.append(_row(0.05, 1.0, label="f"))
-    rows[1].status = bench.REFUSED
+    rows[1].status = REFUSED
     assert [r.label for r in pareto_front(rows)] == ["f", "a", "c", "d", "e"]
     rec = recommend(rows)
     assert rec["live 1 kHz"]["label"] == "c"  # most accurate at 1 kHz with RTF >= 2
@@ -100,21 +103,21 @@ def test_pareto_front_and_tiers():
 
 
 def test_generated_scenes():
-    scene = bench.chain_scene(5)
+    scene = chain_scene(5)
     assert scene.model.n == 5 and scene.model.n_rows == 1
-    star = bench.star_scene(4)
+    star = star_scene(4)
     assert star.model.n == 8 and star.model.n_rows == 6 and star.assembly_residual < 1e-10
 
 
 def test_grids_cover_the_issue():
-    full = bench.full_grid()
+    full = full_grid()
     assert THESIS in full.closures and EXACT in full.closures
     assert any(c.projection for c in full.closures)
     assert any(c.omega_n for c in full.closures) and any(c.kp for c in full.closures)
     assert {"Euler", "implicitfast", "RK4"} == {m[0] for m in full.mujoco}
     assert all(math.isclose(1000.0 / r % 1, 0) for r, _ in full.steps)
-    assert bench.horizon_for("five_bar", False) <= 1.0
-    assert bench.horizon_for("three_chain", False) <= 1.0
+    assert horizon_for("five_bar", False) <= 1.0
+    assert horizon_for("three_chain", False) <= 1.0
 
 
 def test_mujoco_requirement_excludes_4_0_0():
@@ -128,7 +131,7 @@ def test_mujoco_model_matches_the_reference():
     pytest.importorskip("mujoco")
     for name in ("four_bar", "five_bar"):
         scene = load_scene(name)
-        ref = bench.compute_reference(scene, 0.2, check=False)
+        ref = compute_reference(scene, 0.2, check=False)
         settings = compare_mujoco.MujocoSettings(
             integrator="RK4", substeps=4, solref=(-1e7, -2e3), solimp=(0.9999, 0.9999, 0.001, 0.5, 2))
         with compare_mujoco.MujocoSimulator(scene.model, settings) as sim:

@@ -28,7 +28,7 @@ from vjm_ros.core.integrators import FIXED_STEP
 from vjm_ros.scene.generated import chain_scene, star_scene
 from vjm_ros.scene.loader import builtin_scene_text, load_scene, parse_scene
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
-from vjm_ros.studies.bench import long_run
+from vjm_ros.studies.bench.long_run import long_run
 
 G = 9.81
 

@@ -29,40 +29,6 @@ the long four-bar run and writes ``DIR/long_run_<setting>.json``; reports later 
 ``DIR`` include every ``long_run*.json`` found there.
 """
 
-from vjm_ros.scene.generated import chain_scene, star_scene
-from vjm_ros.studies.bench.analysis import pareto_front, recommend
 from vjm_ros.studies.bench.cli import main
-from vjm_ros.studies.bench.grid import (
-    EXACT,
-    REFUSED,
-    THESIS,
-    TIERS,
-    BenchOptions,
-    ClosureVariant,
-    Grid,
-    full_grid,
-)
-from vjm_ros.studies.bench.long_run import long_run
-from vjm_ros.studies.bench.runs import RowResult, compute_reference
-from vjm_ros.studies.bench.study import horizon_for, run_bench
 
-__all__ = [
-    "EXACT",
-    "REFUSED",
-    "THESIS",
-    "TIERS",
-    "BenchOptions",
-    "ClosureVariant",
-    "Grid",
-    "RowResult",
-    "chain_scene",
-    "compute_reference",
-    "full_grid",
-    "horizon_for",
-    "long_run",
-    "main",
-    "pareto_front",
-    "recommend",
-    "run_bench",
-    "star_scene",
-]
+__all__ = ["main"]
