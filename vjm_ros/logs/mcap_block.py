@@ -1,17 +1,18 @@
 """The per-tick messages of a whole block of ticks as MCAP records, built and indexed in bulk.
 
 The messages of one topic at every tick have fixed layouts whose bytes differ only in numbers
-(:class:`vjm_ros.logs.cdr.FixedLayout`): a block's records are written as rows of one byte image
-per tick (``/joint_states``, ``constraint_forces``, each ``closures/<name>/wrench``, ``energy``,
-``/clock``, in that order) with the sequence numbers, times, stamps and values written column by
-column, plus the ``markers`` record after the other messages of every ``marker_every``-th tick.
+(:class:`vjm_ros.logs.cdr.FixedLayout`): a block's records are written as one byte image per tick
+(``/joint_states``, ``constraint_forces``, each ``closures/<name>/wrench``, ``energy``,
+``/clock``, in that order) with the sequence numbers, times, stamps and values stored in by one
+compiled pass (:func:`vjm_ros.logs.stamping.stamp_records`), plus the ``markers`` record after
+the other messages of every ``marker_every``-th tick.
 The bytes equal those of the per-message encoders (test/test_log_blocks.py).
 
 :class:`BlockWriter` is the ``mcap`` writer (1.6, pinned) taking such runs of records: its chunk
 builder copies them into one buffer kept for the whole file and keeps the message indexes as runs
 of arrays; each chunk is written with its indexes in one call to the file. Statistics and indexes
 are those the writer keeps for messages added one by one. The encoder, too, writes every block
-into buffers it keeps, in place: a long run allocates no memory per block (fresh pages cost the
+into a buffer it keeps, in place: a long run allocates no memory per block (fresh pages cost the
 operating system a fault and a clearing each).
 """
 

@@ -9,9 +9,9 @@ released): the image copied to each record's place, then every number stored at 
 Offsets need no alignment.
 
 Cost, the four-bar's 10 s log (10 001 ticks of 623 bytes, five messages each, and 1001 markers
-records): about 2 ms for every record of the run, against 6-11 ms for the numpy column writes
-it replaces (a strided copy per field and block, the image broadcast to every row, and the
-rows copied once more to interleave the markers).
+records), its ten blocks replayed in one process: 0.9 ms for every record, against about 4.5 ms
+for the numpy column writes it replaces (the image broadcast to every row, a strided copy per
+number and block, and the rows copied once more to interleave the markers).
 """
 
 from __future__ import annotations
