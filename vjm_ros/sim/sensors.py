@@ -21,9 +21,6 @@ import numpy as np
 
 from vjm_ros.scene.plant import JointSensors, delay_ticks
 
-FIELDS = 3
-"""Position, velocity, effort."""
-
 
 class SensorModel:
     """Measurements of the joint state, tick by tick or a block at a time.
