@@ -99,16 +99,13 @@ class _ModelReader:
         self.joints = {el.get("name"): el for el in model.findall("joint")}
         self.frames = {el.get("name"): el for el in model.findall("frame")}
         self.cache: dict[str, Pose] = {}
-        self.ignored = [t for t in ("collision and visual geometry", "sensors", "plugins")
-                        if self._has(t)]
+        self.ignored = [what for what, tags in (
+            ("collision and visual geometry", ("link/collision", "link/visual")),
+            ("sensors", ("link/sensor",)), ("plugins", ("plugin",)))
+            if any(model.find(t) is not None for t in tags)]
         if model.find("pose") is not None:
             pose = self.pose(model.find("pose"), "<model><pose>")
             self.gravity = pose.rotation.T @ gravity  # the model frame is the scene's world
-
-    def _has(self, what: str) -> bool:
-        tags = {"collision and visual geometry": ("link/collision", "link/visual"),
-                "sensors": ("link/sensor",), "plugins": ("plugin",)}[what]
-        return any(self.model.find(t) is not None for t in tags)
 
     def fail(self, where: str, expected: str, found: object = ...) -> SceneError:
         return SceneError(self.path, f"model '{self.name}' {where}", expected, found)
