@@ -18,14 +18,8 @@ import sys
 import pytest
 
 from vjm_ros.core.errors import SceneError
-from vjm_ros.scene.loader import (
-    FILE_KEY,
-    MAX_LINKS,
-    MAX_NESTING,
-    MAX_SCENE_BYTES,
-    TOP_KEY,
-    load_scene,
-)
+from vjm_ros.scene.limits import FILE_KEY, MAX_LINKS, MAX_NESTING, MAX_SCENE_BYTES, TOP_KEY
+from vjm_ros.scene.loader import load_scene
 
 BASE = """\
 name: base

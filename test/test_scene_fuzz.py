@@ -38,16 +38,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vjm_ros.core.errors import SceneError
-from vjm_ros.scene.loader import (
-    FILE_KEY,
-    MAX_LINKS,
-    MAX_SCENE_BYTES,
-    TOP_KEY,
-    Scene,
-    builtin_scene_text,
-    builtin_scenes,
-    load_scene,
-)
+from vjm_ros.scene.limits import FILE_KEY, MAX_LINKS, MAX_SCENE_BYTES, TOP_KEY
+from vjm_ros.scene.loader import Scene, builtin_scene_text, builtin_scenes, load_scene
 from vjm_ros.scene.safe_yaml import SceneLoader
 
 # A hang guard, not a speed target: the slowest fuzz case loads in ~0.04 s here and the largest

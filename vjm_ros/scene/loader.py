@@ -6,13 +6,13 @@ expected and what was found (:class:`~vjm_ros.core.errors.SceneError`). The buil
 errors.
 
 Key paths are written ``chains[0].links[1].mass``. Errors that no key can locate use a line and
-column (``line 3, column 7``: YAML syntax, bytes that are not UTF-8), :data:`FILE_KEY` (the file
-cannot be read) or :data:`TOP_KEY` (the document is not a mapping).
+column (``line 3, column 7``: YAML syntax, bytes that are not UTF-8), ``FILE_KEY`` (the file
+cannot be read) or ``TOP_KEY`` (the document is not a mapping).
 
-Loading is bounded: a file holds at most :data:`MAX_SCENE_BYTES`, nesting at most
-:data:`MAX_NESTING` levels, YAML merge keys expand to at most :data:`MAX_MERGED_ENTRIES` entries,
-and a scene has at most :data:`MAX_LINKS` links and :data:`MAX_CLOSURES` closures, so that any file,
-however malformed, is accepted or refused within a fraction of a second.
+Loading is bounded (:mod:`vjm_ros.scene.limits`): a file holds at most ``MAX_SCENE_BYTES``,
+nesting at most ``MAX_NESTING`` levels, YAML merge keys expand to at most ``MAX_MERGED_ENTRIES``
+entries, and a scene has at most ``MAX_LINKS`` links and ``MAX_CLOSURES`` closures, so that any
+file, however malformed, is accepted or refused within a fraction of a second.
 """
 
 from __future__ import annotations
@@ -22,19 +22,7 @@ from pathlib import Path
 
 from vjm_ros.core.errors import SceneError
 from vjm_ros.scene.builder import Scene, SceneBuilder
-from vjm_ros.scene.limits import (  # noqa: F401 (the limits are part of this module's API)
-    DEFAULT_CLOSURE_TOLERANCE,
-    FILE_KEY,
-    MAX_CLOSURES,
-    MAX_LINKS,
-    MAX_MAGNITUDE,
-    MAX_MERGED_ENTRIES,
-    MAX_NESTING,
-    MAX_SCENE_BYTES,
-    MAX_STRING,
-    TOP_KEY,
-    TOP_KEYS,
-)
+from vjm_ros.scene.limits import FILE_KEY, MAX_SCENE_BYTES
 from vjm_ros.scene.safe_yaml import parse_yaml
 
 __all__ = ["Scene", "builtin_scene_text", "builtin_scenes", "load_scene", "parse_scene"]
@@ -66,7 +54,7 @@ def load_scene(spec: str | Path) -> Scene:
     ----------
     spec : str or Path
         A name from :func:`builtin_scenes`, the path of a UTF-8 YAML file of at most
-        :data:`MAX_SCENE_BYTES` bytes, or the path of a ``.sdf``, ``.urdf`` or MJCF ``.xml``
+        ``MAX_SCENE_BYTES`` bytes, or the path of a ``.sdf``, ``.urdf`` or MJCF ``.xml``
         model (docs/models.md).
 
     Returns
