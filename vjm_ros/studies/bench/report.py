@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from vjm_ros.sim.samples import RUN_BLOCK_TICKS
 from vjm_ros.studies.bench.analysis import (
     pareto_front,
 )
@@ -18,7 +19,6 @@ from vjm_ros.studies.bench.grid import (
     TIERS,
 )
 from vjm_ros.studies.bench.runs import (
-    BLOCK_TICKS,
     RowResult,
 )
 from vjm_ros.studies.bench.scaling import (
@@ -329,7 +329,7 @@ def _measures_text() -> list[str]:
 def _scaling_text(scaling: dict) -> list[str]:
     lines = ["## Cost per tick against size", "",
              "Microseconds per 1 kHz tick (one step per tick, each tick sampled, in blocks of "
-             f"at most {BLOCK_TICKS} ticks, one compiled call each), median of repeats"
+             f"at most {RUN_BLOCK_TICKS} ticks, one compiled call each), median of repeats"
              + (f", each repeat timing enough ticks to take {1e3 * scaling['seconds_per_repeat']:g} ms"
                 " at least" if scaling.get("seconds_per_repeat") else "") + ". `links`: one "
              "chain of N links whose tip runs on a line; `chains`: N two-link chains whose tips "
@@ -361,7 +361,7 @@ def _bare_step_lines(table: list[dict], keys: list[str]) -> list[str]:
                          f"bare step ({tick / bare:.2f}x)")
     if not parts:
         return []
-    return [f"One link, {ONE_LINK_TICKS} ticks observed in blocks of {BLOCK_TICKS} against the "
+    return [f"One link, {ONE_LINK_TICKS} ticks observed in blocks of {RUN_BLOCK_TICKS} against the "
             "same steps alone in one compiled call (nothing observed or stored; the arithmetic a "
             "tick cannot go below): "
             + "; ".join(parts) + ".", ""]

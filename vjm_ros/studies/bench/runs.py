@@ -65,11 +65,6 @@ def _positions(model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pts, link_segments(model, kin)[:, 1]
 
 
-BLOCK_TICKS = RUN_BLOCK_TICKS
-"""Ticks per call when a row is run or timed: a whole-run cost, as ``vjm run`` pays it
-(:data:`vjm_ros.sim.samples.RUN_BLOCK_TICKS`)."""
-
-
 def _exact_run(scene: Scene, horizon: float, rate: float, opts: dict) -> tuple[np.ndarray, np.ndarray, float]:
     settings = SimulationSettings(closure="exact", rate=rate, **opts)
     sim = _started(scene, Simulator(scene.model, settings, scene.gains, scene.plant))
@@ -208,13 +203,13 @@ def run_vjm(scene: Scene, cfg: RowConfig, horizon: float, ref: Reference | None)
     pts[0], ends[0] = p0, e0
     clock = _Clock()
     evals0 = sim.mechanism.evaluations
-    block = SampleBlock(scene.model, BLOCK_TICKS)
+    block = SampleBlock(scene.model, RUN_BLOCK_TICKS)
     try:
         while sim.ticks < ticks:
             first = sim.ticks + 1
             try:
                 with clock:
-                    sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
+                    sim.advance_block(block, min(RUN_BLOCK_TICKS, ticks - sim.ticks))
             finally:
                 traj.extend(block)
                 done = len(block)  # the block observed the points and link ends already
@@ -273,10 +268,10 @@ def _deviation(res: RowResult, ref: Reference | None, rate: float, ticks: int,
 def _time_vjm(scene: Scene, cfg: RowConfig, horizon: float) -> tuple[float, float]:
     sim = _make_vjm(scene, cfg)
     ticks = int(round(horizon * cfg.rate))
-    block = SampleBlock(scene.model, BLOCK_TICKS)
+    block = SampleBlock(scene.model, RUN_BLOCK_TICKS)
     t0, c0 = time.perf_counter(), time.process_time()
     while sim.ticks < ticks:
-        sim.advance_block(block, min(BLOCK_TICKS, ticks - sim.ticks))
+        sim.advance_block(block, min(RUN_BLOCK_TICKS, ticks - sim.ticks))
     return (time.perf_counter() - t0) / horizon, (time.process_time() - c0) / horizon
 
 
@@ -346,8 +341,8 @@ def _time_mujoco(scene: Scene, cfg: RowConfig, horizon: float) -> tuple[float, f
         # Blocks of ticks in one call, as vjm's rows run (the efforts are held over the run).
         mj, m, d = sim.mj, sim.m, sim.d
         t0, c0 = time.perf_counter(), time.process_time()
-        for start in range(0, ticks, BLOCK_TICKS):
-            mj.mj_step(m, d, nstep=min(BLOCK_TICKS, ticks - start) * sim.substeps)
+        for start in range(0, ticks, RUN_BLOCK_TICKS):
+            mj.mj_step(m, d, nstep=min(RUN_BLOCK_TICKS, ticks - start) * sim.substeps)
         return (time.perf_counter() - t0) / horizon, (time.process_time() - c0) / horizon
 
 

@@ -14,7 +14,7 @@ from vjm_ros.core.errors import (
 )
 from vjm_ros.scene.generated import chain_scene, star_scene
 from vjm_ros.scene.loader import Scene
-from vjm_ros.sim.samples import SampleBlock
+from vjm_ros.sim.samples import RUN_BLOCK_TICKS, SampleBlock
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 from vjm_ros.studies.bench.grid import (
     MAX_SCALING_TICKS,
@@ -23,7 +23,6 @@ from vjm_ros.studies.bench.grid import (
 from vjm_ros.studies.bench.progress import (
     BenchProgress,
 )
-from vjm_ros.studies.bench.runs import BLOCK_TICKS
 
 SCALING_METHODS = (
     ("semi_implicit_euler", {"closure": "penalty", "omega_n": 100.0, "zeta": 1.0}),
@@ -59,12 +58,12 @@ def tick_cost(scene: Scene, integrator: str, settings: dict, ticks: int, repeats
     for _ in range(max(repeats, 1)):
         sim = Simulator(scene.model, SimulationSettings(integrator=integrator, rate=1000.0,
                                                         **settings), scene.gains)
-        block = SampleBlock(scene.model, BLOCK_TICKS)
+        block = SampleBlock(scene.model, RUN_BLOCK_TICKS)
         sim.blocks_compiled()
         sim.advance_block(block, 1)  # warm-up
         t0 = time.perf_counter()
         while sim.ticks <= ticks:
-            sim.advance_block(block, min(BLOCK_TICKS, ticks + 1 - sim.ticks))
+            sim.advance_block(block, min(RUN_BLOCK_TICKS, ticks + 1 - sim.ticks))
         samples.append((time.perf_counter() - t0) / ticks)
     return float(statistics.median(samples))
 
