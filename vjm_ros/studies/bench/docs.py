@@ -38,9 +38,6 @@ from vjm_ros.studies.bench.report import (
 from vjm_ros.studies.bench.runs import (
     RowResult,
 )
-from vjm_ros.studies.bench.scaling import (
-    _scaling_keys,
-)
 from vjm_ros.studies.pages import sections
 
 
@@ -299,23 +296,9 @@ def _mujoco_findings(results: dict, rows: dict[str, list[RowResult]]) -> list[st
 
 
 def _scaling_findings(results: dict) -> list[str]:
-    """Compiled against numpy kernel, and growth of the cost per tick."""
+    """Growth of the cost per tick."""
     out = []
     if "scaling" in results:
-        sc = results["scaling"]
-        ratios = []
-        for key in _scaling_keys(sc):
-            if key.endswith("[numpy kernel]"):
-                base = key[: -len(" [numpy kernel]")]
-                for family in ("links", "chains"):
-                    for r in sc[family]["table"]:
-                        if r.get(key) and r.get(base):
-                            ratios.append(r[key] / r[base])
-        if ratios:
-            out.append(f"- **Compiled kernel** (`{results['meta'].get('kernel')}`, the default "
-                       f"when numba is installed): {min(ratios):.3g}–{max(ratios):.3g}x less time "
-                       "per 1 kHz tick than the numpy reference kernel in the scaling study; every "
-                       "timing above uses it.")
         for family, what in (("links", "along one chain"), ("chains", "with the number of chains")):
             g = results["scaling"][family]["growth_exponent"]
             out.append(f"- **Cost per tick {what}** grows roughly as "

@@ -124,7 +124,7 @@ def plot_scaling(scaling: dict, path: Path) -> None:
             g = scaling[family]["growth_exponent"].get(key)
             lab = f"{key} (~n^{g:.2f})" if g is not None else key
             ax.plot(xs, ys, marker="o", label=lab, color=_COLORS.get(integ, "black"),
-                    linestyle="--" if "kernel]" in key else "-", markersize=4)
+                    markersize=4)
         ax.axhline(1000.0, color="gray", linestyle=":", linewidth=1)
         ax.set_xscale("log", base=2)
         ax.set_yscale("log")
