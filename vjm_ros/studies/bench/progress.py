@@ -19,7 +19,7 @@ def limit_threads() -> dict:
     """Keep BLAS and OpenMP on one thread, also when numpy is already loaded.
 
     Sets ``OMP_NUM_THREADS`` and friends for anything started later, and calls the loaded
-    OpenBLAS's ``set_num_threads(1)`` (through threadpoolctl when it is installed).
+    OpenBLAS's ``set_num_threads(1)``.
 
     Returns
     -------
@@ -30,14 +30,6 @@ def limit_threads() -> dict:
                 "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS"):
         os.environ[var] = "1"
     info = {"env": "OMP/OPENBLAS/MKL_NUM_THREADS=1", "blas": "not found"}
-    try:
-        from threadpoolctl import threadpool_limits
-
-        threadpool_limits(1)
-        info["blas"] = "threadpoolctl limit 1"
-        return info
-    except ImportError:
-        pass
     try:
         with open("/proc/self/maps", encoding="utf-8") as fh:
             libs = sorted({ln.split()[-1] for ln in fh if "openblas" in ln.lower() and "/" in ln})
