@@ -24,11 +24,6 @@ SCENE_DESCRIPTION_QOS = QoSProfile(
 """The QoS the simulator publishes its scene description with (a late joiner gets the last one)."""
 
 
-def scene_description_topic(simulator: str = "vjm_sim_node") -> str:
-    """The description topic of a simulator node, relative to the caller's namespace."""
-    return f"{simulator}/scene_description"
-
-
 def wait_for_scene_description(
     node: Node, simulator: str = "vjm_sim_node", timeout: float = 10.0
 ) -> str | None:
@@ -40,13 +35,14 @@ def wait_for_scene_description(
     ----------
     node : rclpy.node.Node
     simulator : str
-        Name of the simulator node (in the caller's namespace).
+        Name of the simulator node (in the caller's namespace): the topic is
+        ``<simulator>/scene_description``, relative to that namespace.
     timeout : float
         Longest wait, wall s.
     """
     received: list[str] = []
     sub = node.create_subscription(
-        String, scene_description_topic(simulator), lambda m: received.append(m.data),
+        String, f"{simulator}/scene_description", lambda m: received.append(m.data),
         SCENE_DESCRIPTION_QOS,
     )
     executor = SingleThreadedExecutor(context=node.context)
