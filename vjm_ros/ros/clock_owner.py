@@ -31,11 +31,6 @@ CONFLICT = "clock_conflict"
 """Kind of the notice that names another publisher of ``/clock``."""
 
 
-def full_name(namespace: str, name: str) -> str:
-    """``/ns/name`` of a node (``/name`` in the root namespace)."""
-    return f"{namespace.rstrip('/')}/{name}"
-
-
 def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[str]:
     """Full names of the publishers of ``/clock`` besides this node's own one.
 
@@ -50,12 +45,13 @@ def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[
     Returns
     -------
     list of str
-        Sorted full names, one per other publisher.
+        Sorted full names (``/ns/name``; ``/name`` in the root namespace), one per other
+        publisher.
     """
     count = Counter(publishers)
     if count[own]:
         count[own] -= 1
-    return sorted(full_name(ns, name) for (ns, name), k in count.items() for _ in range(k))
+    return sorted(f"{ns.rstrip('/')}/{name}" for (ns, name), k in count.items() for _ in range(k))
 
 
 class ClockOwner:
