@@ -100,14 +100,11 @@ def _constraint(graph: JointGraph, group: set) -> GraphJoint | None:
         return GraphJoint(name=named.name, kind=SLIDE, parent=line_side, child=pinned,
                           point=point_on_line.copy(), child_point=point_on_pinned.copy(),
                           axis=slide.axis.copy(), role=CONSTRAINT, element=named.element)
-    if not pins and _spans_plane([j.axis for j in slides]):
+    # slides along two directions that are not parallel span the plane: only the angle is held
+    if not pins and any(np.linalg.norm(np.cross(slides[0].axis, j.axis)) > 1e-6
+                        for j in slides[1:]):
         p = (graph.bodies[b].origin if b != WORLD else np.zeros(3)).copy()
         return GraphJoint(name=named.name, kind=ALIGN, parent=a, child=b, point=p,
                           child_point=p.copy(), axis=slides[0].axis.copy(), role=CONSTRAINT,
                           element=named.element)
     return None
-
-
-def _spans_plane(axes: list) -> bool:
-    """Whether the slide directions include two that are not parallel."""
-    return any(np.linalg.norm(np.cross(axes[0], d)) > 1e-6 for d in axes[1:])

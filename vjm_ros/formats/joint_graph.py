@@ -294,10 +294,6 @@ class _Reducer(SceneWriter):
         return None
 
     # ---------------------------------------------------------------------- 4. frames
-    def joint_point(self, j, forward: bool) -> np.ndarray:
-        """Where joint ``j`` sits on the link in front of it when walked ``forward``, (2,)."""
-        return self.flat(j.point if forward else j.child_point)
-
     def oriented_axis(self, j, forward: bool) -> np.ndarray:
         """A prismatic joint's in-plane axis, as the motion of the link in front of it, (2,)."""
         d = self.flat(j.axis)
@@ -312,7 +308,8 @@ class _Reducer(SceneWriter):
         joint ``r`` (if any) is prismatic and fixes the run's ``psi`` by its axis.
         """
         m = len(ch)
-        points = [self.joint_point(j, fwd) for j, fwd, _ in ch]
+        # where each joint sits on the link in front of it, walked forward or backward
+        points = [self.flat(j.point if fwd else j.child_point) for j, fwd, _ in ch]
         out = []
         ground_origin = points[0]
         first = ch[0][0]

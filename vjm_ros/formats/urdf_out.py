@@ -261,10 +261,6 @@ def _link(model: Model, i: int, size: float) -> ET.Element:
     return el
 
 
-def _parent_name(model: Model, i: int) -> str:
-    return ROOT_LINK if model.first_of_chain[i] else model.links[i - 1].name
-
-
 def joint_origin(model: Model, i: int, offset: float = 0.0) -> tuple[np.ndarray, float, np.ndarray]:
     """Origin (position, yaw) and axis of joint ``i`` in its parent's frame.
 
@@ -312,7 +308,8 @@ def _joint(model: Model, i: int, offset: float, effort: float) -> ET.Element:
     else:
         kind = "prismatic"
     el = ET.Element("joint", name=joint.name, type=kind)
-    ET.SubElement(el, "parent", link=_parent_name(model, i))
+    ET.SubElement(el, "parent",
+                  link=ROOT_LINK if model.first_of_chain[i] else model.links[i - 1].name)
     ET.SubElement(el, "child", link=model.links[i].name)
     xyz, yaw, axis = joint_origin(model, i, offset)
     _origin(el, xyz, yaw)
