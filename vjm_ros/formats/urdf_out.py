@@ -149,22 +149,14 @@ def _check_names(model: Model) -> None:
     if ROOT_LINK in links:
         raise ValueError(f"link '{ROOT_LINK}': the URDF's root link has this name; rename the link")
     for cl in model.closures:
-        for extra in _carriage_names(cl):
-            if extra in links:
-                raise ValueError(f"link '{extra}' clashes with the carriage of closure '{cl.name}'")
-        for extra in _closure_joint_names(cl):
+        carriage = f"{cl.name}_carriage"
+        if cl.kind != HINGE and carriage in links:
+            raise ValueError(f"link '{carriage}' clashes with the carriage of closure '{cl.name}'")
+        suffixes = {HINGE: [""], SLIDER: ["", "_slide"], ANGLE: ["", "_x"]}[cl.kind]
+        for extra in (cl.name + s for s in suffixes):
             if extra in joints:
                 raise ValueError(f"joint '{extra}' clashes with the SDFormat joint of closure "
                                  f"'{cl.name}'; rename the joint or the closure")
-
-
-def _carriage_names(closure) -> list[str]:
-    return [] if closure.kind == HINGE else [f"{closure.name}_carriage"]
-
-
-def _closure_joint_names(closure) -> list[str]:
-    extra = {HINGE: [], SLIDER: ["_slide"], ANGLE: ["_x"]}[closure.kind]
-    return [closure.name] + [closure.name + e for e in extra]
 
 
 def _scale(model: Model) -> float:
