@@ -142,6 +142,7 @@ def run(args) -> int:
         udd = np.zeros(cm.dof) if args.udd is None else np.array(args.udd)
         tau = cm.inverse_dynamics(q, qd, udd, **kw)
         asked = {"udd": udd.tolist()}
+    measure = cm.singularity_measure(q)
     out = {
         "scene": model.name,
         "dof": cm.dof,
@@ -149,7 +150,7 @@ def run(args) -> int:
         "q": dict(zip(names, q.tolist(), strict=True)),
         "qd": dict(zip(names, qd.tolist(), strict=True)),
         "points": {p.name: cm.forward_kinematics(q, p.name).tolist() for p in model.points},
-        "singularity_measure": _finite_or_none(cm.singularity_measure(q)),
+        "singularity_measure": measure if np.isfinite(measure) else None,  # JSON has no inf
         "task_point": point,
         "task_jacobian": cm.task_jacobian(q, point).tolist() if point else None,
         "task_bias": cm.task_bias(q, qd, point).tolist() if point else None,
@@ -167,11 +168,6 @@ def run(args) -> int:
     for key, value in out.items():
         print(f"{key:<{width}}  {_short(value)}")
     return 0
-
-
-def _finite_or_none(value: float) -> float | None:
-    """JSON has no infinity: ``None`` (null) for it."""
-    return value if np.isfinite(value) else None
 
 
 def _short(value) -> str:
