@@ -93,7 +93,7 @@ def _sweep(args) -> int:
 
     spec = load_spec(args.spec)
     out = args.out or Path("sweep_out") / spec.name
-    figure = parse_figure(args.figure, spec) if args.figure else None
+    figure = parse_figure(args.figure) if args.figure else None
     sweep = Sweep(spec, out, args.resume, args.overwrite)  # every check; nothing written yet
     start = sweep.start
     if args.resume and (start.kept or start.retried or start.dropped):

@@ -55,7 +55,7 @@ def summary_lines(result: dict) -> list[str]:
     return lines
 
 
-def parse_figure(text: str, spec: SweepSpec) -> tuple[str, str]:
+def parse_figure(text: str) -> tuple[str, str]:
     """``Y,X`` of ``--figure``: two measures.
 
     Raises
