@@ -1,18 +1,8 @@
 """The node's per-tick messages as rclpy message objects, built field by field.
 
 The floor of :mod:`benchmarks.bare_publish` (the same messages published by bare rclpy) and the
-tests' oracle for the bytes the node publishes (:mod:`vjm_ros.ros.wire`). Their layouts are those
-of :mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
-
-* ``/joint_states``: every joint in scene order; position (rad or m), velocity (rad/s or m/s),
-  effort = the applied generalized effort (N m or N; zero on passive joints);
-* ``~/constraint_forces``: ``data[3 i : 3 i + 3] = (fx, fy, mz)`` of closure ``i`` (N, N, N m),
-  world frame, acting on the closure's point; ``layout.dim[i]`` has ``label`` = closure name,
-  ``size = stride = 3``;
-* ``~/closures/<name>/wrench``: the same force as ``WrenchStamped`` in frame ``world`` (force
-  ``(fx, fy, 0)``, torque ``(0, 0, mz)``; it acts at the closure's point, not at the origin);
-* ``~/energy``: ``(kinetic, potential, constraint, total)`` in J, one labelled dimension each;
-* every header stamp is simulated time.
+tests' oracle for the bytes the node publishes (:mod:`vjm_ros.ros.wire`), in the layouts
+:mod:`vjm_ros.ros.conversions` describes (those of :mod:`vjm_ros.logs.messages`).
 """
 
 from __future__ import annotations

@@ -2,8 +2,21 @@
 
 Stamps and times, the private wrench topic of a closure, the chain tips' trace of the markers,
 ``/diagnostics``, and the joint arrays of a received ``sensor_msgs/JointState``. The per-tick
-messages the node publishes are serialized by :mod:`vjm_ros.ros.wire`, in the layouts of
-:mod:`vjm_ros.logs.messages`; every header stamp is simulated time.
+messages the node publishes are serialized by :mod:`vjm_ros.ros.wire` in the layouts of
+:mod:`vjm_ros.logs.messages`, so a live topic and its MCAP log carry the same data:
+
+* ``/joint_states``: every joint in scene order; position (rad or m), velocity (rad/s or m/s),
+  effort = the applied generalized effort (N m or N; zero on passive joints);
+* ``~/constraint_forces``: ``data[3 i : 3 i + 3] = (fx, fy, mz)`` of closure ``i`` (N, N, N m),
+  world frame, acting on the closure's point; ``layout.dim[i]`` has ``label`` = closure name,
+  ``size = stride = 3``;
+* ``~/closures/<name>/wrench``: the same force as ``WrenchStamped`` in frame ``world`` (force
+  ``(fx, fy, 0)``, torque ``(0, 0, mz)``; it acts at the closure's point, not at the origin);
+* ``~/energy``: ``(kinetic, potential, constraint, total)`` in J, one labelled dimension each;
+* every header stamp is simulated time.
+
+The same messages built as rclpy message objects, field by field, are the tests' oracle and the
+floor of a benchmark (``benchmarks/ros_messages.py`` in a checkout).
 """
 
 from __future__ import annotations
