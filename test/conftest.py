@@ -7,6 +7,8 @@ one machine from seeing each other's messages. ``VJM_TIERED=0``: see below.
 
 import os
 
+import pytest
+
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + (os.getpid() % 101)))
 os.environ.setdefault(
@@ -45,3 +47,23 @@ def four_bar_samples(ticks):
         sim.advance()
         samples.append(sim.sample())
     return scene, sim, samples
+
+
+@pytest.fixture(scope="session")
+def reset_run(tmp_path_factory):
+    """One live ``vjm_sim_node`` run reset half-way (:func:`reset_run.run_with_reset`), shared by
+    the tests that only read it: test_node_duration.py (``duration`` across the reset) and
+    test_log_reset_event.py (the reset event in the node's MCAP log).
+
+    100 Hz ticks (two substeps keep the thesis gains inside rk4's bound) for ``duration`` s of
+    simulated time, recording an MCAP; the reset comes once ``/clock`` has passed
+    ``reset_after`` s. Returns ``(probe, returncode, out, mcap, rate, duration, reset_after)``.
+    """
+    from reset_run import run_with_reset
+
+    rate, duration, reset_after = 100.0, 2.0, 1.0
+    mcap = tmp_path_factory.mktemp("reset_run") / "run.mcap"
+    probe, returncode, out = run_with_reset(
+        [f"rate_hz:={rate}", "substeps:=2", f"duration:={duration}", f"mcap:={mcap}"],
+        reset_after, "reset_probe")
+    return probe, returncode, out, mcap, rate, duration, reset_after

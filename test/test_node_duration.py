@@ -10,18 +10,17 @@ import json
 import re
 
 import pytest
-from reset_run import run_with_reset
 
 pytestmark = pytest.mark.ros
 
 
-def test_duration_is_simulated_time_since_start_also_after_a_reset():
-    # 100 Hz ticks (two substeps keep the thesis gains inside rk4's bound) for 2 s of simulated
-    # time; the reset comes once /clock has passed 1 s.
-    rate, duration = 100.0, 2.0
+def test_duration_is_simulated_time_since_start_also_after_a_reset(reset_run):
+    # The session's run reset half-way (conftest.py ``reset_run``, shared with
+    # test_log_reset_event.py): 100 Hz ticks (two substeps keep the thesis gains inside rk4's
+    # bound) for 2 s of simulated time; the reset comes once /clock has passed 1 s.
+    probe, returncode, out, _, rate, duration, reset_after = reset_run
+    assert (rate, duration, reset_after) == (100.0, 2.0, 1.0)  # the times asserted below
     tick_ns = round(1e9 / rate)
-    probe, returncode, out = run_with_reset(
-        [f"rate_hz:={rate}", "substeps:=2", f"duration:={duration}"], 1.0, "duration_probe")
     assert returncode == 0, out
     clocks = probe.clocks
     assert any(e.startswith("reset:") for e in probe.events), probe.events
