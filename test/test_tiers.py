@@ -119,14 +119,25 @@ def _vjm(args, cache: Path | None, **env):
                           capture_output=True, text=True, timeout=600, check=True)
 
 
-def test_cold_run_writes_what_a_compiled_run_writes(tmp_path):
+@pytest.fixture(scope="module")
+def warm_run(tmp_path_factory) -> tuple[Path, str]:
+    """``vjm run five_bar --duration 0.1 --out DIR`` with numba's cache as the suite has it
+    (filled by this run where it is cold: the kernels, the pipeline and the CSV writer): its
+    output folder and its stderr. Shared by the tests that only read it or need the cache
+    filled."""
+    out = tmp_path_factory.mktemp("tiers") / "warm"
+    said = _vjm(["run", "five_bar", "--duration", "0.1", "--out", str(out)], None).stderr
+    return out, said
+
+
+def test_cold_run_writes_what_a_compiled_run_writes(tmp_path, warm_run):
     """An empty numba cache: ``vjm run`` starts as plain Python with a compile server beside it,
     writes the same files as with the kernels compiled, and leaves the server compiling in a
     session of its own, which it names on stderr (reaped here: the slow
     ``test_compile_server.py`` test lets one finish)."""
     cache = tmp_path / "cache"
     cache.mkdir()
-    cold, warm = tmp_path / "cold", tmp_path / "warm"
+    cold = tmp_path / "cold"
     try:
         said = _vjm(["run", "five_bar", "--duration", "0.1", "--out", str(cold)], cache).stderr
         assert "not in numba's cache yet" in said  # the user is told why the run is slow
@@ -135,7 +146,7 @@ def test_cold_run_writes_what_a_compiled_run_writes(tmp_path):
         assert said.count(f"compiling the kernels goes on in the background (pid {pid}") == 1
     finally:
         reap(cache)
-    said = _vjm(["run", "five_bar", "--duration", "0.1", "--out", str(warm)], None).stderr
+    warm, said = warm_run  # the same run with the suite's cache
     assert "numba" not in said
     assert (cold / "trajectory.csv").read_bytes() == (warm / "trajectory.csv").read_bytes()
     keys = ("max_closure_error", "energy_drift", "finite", "samples")
@@ -224,7 +235,7 @@ def test_a_run_in_blocks_never_loads_the_kernel(tmp_path):
     assert done.stdout.split() == ["0", "new"]
 
 
-def test_a_short_run_never_imports_numba(tmp_path):
+def test_a_short_run_never_imports_numba(tmp_path, warm_run):
     """numba's cache filled: a run shorter than the pipeline's first call as plain Python (and its
     CSV shorter than :data:`~vjm_ros.sim.trajectory.CSV_PLAIN_ROWS`) ends without importing numba
     (0.3-0.4 s with the loading of the pipeline), and writes the same files as the same run
@@ -245,7 +256,7 @@ def test_a_short_run_never_imports_numba(tmp_path):
         assert done.returncode == 0, done.stderr[-2000:]
         return done.stdout.split()[-3:]
 
-    _vjm(["run", "five_bar", "--duration", "0.1"], None)  # fills the cache where it is cold
+    # warm_run has filled the cache where it was cold
     short = (PLAIN_PART_TICKS // 2) / 1000.0  # five_bar runs at 1 kHz
     assert run(tmp_path / "plain", short, "1") == ["0", "False", "False"]
     assert run(tmp_path / "compiled", short, "0") == ["0", "True", "True"]
@@ -259,12 +270,12 @@ def test_a_short_run_never_imports_numba(tmp_path):
         assert plain == compiled, name
 
 
-def test_with_the_tiers_off_the_csv_writer_is_loaded_before_the_run(tmp_path):
+def test_with_the_tiers_off_the_csv_writer_is_loaded_before_the_run(warm_run):
     """``VJM_TIERED=0`` (what the benchmarks set): preparing an entry point loads its compiled
     code from numba's cache then and there, as with the tiers on. Before, it only marked it
     ready, and ``vjm run --out`` loaded the CSV writer at its first table, in the CSV's thread
     and inside the run's ``wall_time`` (150 ms of a 10 s four-bar run with all three logs)."""
-    _vjm(["run", "four_bar", "--duration", "0.1", "--out", str(tmp_path / "fill")], None)
+    # warm_run (a run with --out) has put the CSV writer in numba's cache where it was cold
     script = ("from vjm_ros.sim import float_text, trajectory\n"
               "trajectory.prepare_csv_writer(10**6)\n"
               "print(len(float_text._csv.overloads))\n")
