@@ -6,6 +6,8 @@ test/oracle/mechanism.py): applied at the printed state, they give the asked acc
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import re
@@ -28,6 +30,28 @@ def vjm_model(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "vjm_ros.app.cli", "model", *args],
                           capture_output=True, text=True, timeout=GUARD,
                           env=dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST"))
+
+
+def vjm_model_here(*args: str) -> subprocess.CompletedProcess:
+    """``vjm model ARGS`` through the command's entry point (:func:`vjm_ros.app.cli.main`, what
+    the ``vjm`` script calls) in this process: its exit code, standard output and standard
+    error, as :func:`vjm_model` gives them from a process of its own.
+
+    The tests that load a model use it: a process each paid the interpreter's start and the
+    loading of the compiled model (about 0.8 s) for the same code path; ``vjm model`` as a
+    process of its own stays checked by :func:`vjm_model` here and by
+    test_closed_model.py::test_vjm_model_prints_what_the_api_computes.
+    """
+    from vjm_ros.app import cli
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = cli.main(["model", *args])
+        except SystemExit as exc:  # argparse's refusals and --help
+            code = exc.code if isinstance(exc.code, int) else 1
+    return subprocess.CompletedProcess(["vjm", "model", *args], code, out.getvalue(),
+                                       err.getvalue())
 
 
 def strict_json(text: str) -> dict:
@@ -54,7 +78,7 @@ def test_udd_with_xdd_is_refused_naming_both():
 def test_the_docstring_examples_run_and_their_efforts_give_what_they_ask(args):
     if "--json" not in args:
         args = [*args, "--json"]
-    out = vjm_model(*args)
+    out = vjm_model_here(*args)
     assert out.returncode == 0, out.stderr
     got = strict_json(out.stdout)
     assert list(got) == list(model_cli.KEYS)  # the documented keys, in order
@@ -90,7 +114,7 @@ def test_a_mechanism_without_closures_prints_strict_json():
 ], ids=["singular-point", "beyond-limits", "preload-non-redundant", "preload-nan",
         "unknown-point"])
 def test_exit_codes_are_the_documented_ones(args, code, message):
-    out = vjm_model(*args)
+    out = vjm_model_here(*args)
     assert out.returncode == code, out.stderr
     assert code in model_cli.EXIT_CODES
     assert re.search(message, out.stderr), out.stderr
