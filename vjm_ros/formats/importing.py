@@ -1,8 +1,8 @@
 """Models of other formats as scenes: the reader chosen by the file's extension.
 
-:func:`import_model` gives the scene document and its YAML text (what ``vjm import`` writes);
-:func:`load_model_scene` gives the :class:`~vjm_ros.scene.builder.Scene` (what
-:func:`vjm_ros.scene.load_scene` returns for a ``.sdf``, ``.urdf`` or ``.xml`` path).
+:func:`import_model` gives the scene document, its YAML text (what ``vjm import`` writes) and
+the :class:`~vjm_ros.scene.builder.Scene` built from it (what :func:`vjm_ros.scene.load_scene`
+returns for a ``.sdf``, ``.urdf`` or ``.xml`` path).
 """
 
 from __future__ import annotations
@@ -101,19 +101,3 @@ def _build(path: str, doc: dict, text: str) -> Scene | None:
         if exc.key.startswith("closures[") and "hold at t = 0" in exc.expected:
             return None
         raise
-
-
-def load_model_scene(path: str | Path) -> Scene:
-    """The scene of the model file ``path`` (``.sdf``, ``.urdf`` or MJCF ``.xml``).
-
-    Returns
-    -------
-    Scene
-        Its ``text`` is the scene YAML of the import.
-
-    Raises
-    ------
-    SceneError
-        As :func:`import_model`.
-    """
-    return import_model(path).scene

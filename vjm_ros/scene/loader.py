@@ -43,7 +43,7 @@ MODEL_SUFFIXES = (".sdf", ".urdf", ".xml")
 """Extensions of model files of other formats (SDFormat, URDF, MJCF), read as scenes by
 :data:`MODEL_READER`."""
 MODEL_READER = "vjm_ros.formats.importing"
-"""The module whose ``load_model_scene(path)`` reads them. ``vjm_ros.formats`` sits above this
+"""The module whose ``import_model(path).scene`` reads them. ``vjm_ros.formats`` sits above this
 layer (it builds scene documents with it), so it is found by name when a model path is loaded."""
 
 
@@ -70,7 +70,7 @@ def load_scene(spec: str | Path) -> Scene:
     if spec_s in builtin_scenes():
         return parse_scene(builtin_scene_text(spec_s), source=f"<builtin {spec_s}>")
     if spec_s.lower().endswith(MODEL_SUFFIXES):
-        return import_module(MODEL_READER).load_model_scene(spec_s)
+        return import_module(MODEL_READER).import_model(spec_s).scene
     return parse_scene(_read_file(spec_s), source=spec_s)
 
 
