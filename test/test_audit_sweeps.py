@@ -19,9 +19,9 @@ import pytest
 
 from vjm_ros.scene import load_scene
 from vjm_ros.studies.sweep import cli as sweep_cli
-from vjm_ros.studies.sweep.engine import RESULTS_CSV, Engine, Sweep
+from vjm_ros.studies.sweep.engine import Engine, Sweep
 from vjm_ros.studies.sweep.spec import parse_spec
-from vjm_ros.studies.sweep.table import begin_table, inspect_table
+from vjm_ros.studies.sweep.table import RESULTS_CSV, begin_table, inspect_table
 
 BASE = "scenes: [four_bar]\nduration: 0.01\nreference: false\n"
 

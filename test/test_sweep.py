@@ -23,10 +23,10 @@ import pytest
 import yaml
 
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.studies.sweep.engine import RESULTS_CSV, RESULTS_PARQUET, Engine, Sweep, run_sweep
+from vjm_ros.studies.sweep.engine import Engine, Sweep, run_sweep
 from vjm_ros.studies.sweep.run import MEASURES
 from vjm_ros.studies.sweep.spec import SpecError, load_spec, parse_spec
-from vjm_ros.studies.sweep.table import cell
+from vjm_ros.studies.sweep.table import RESULTS_CSV, RESULTS_PARQUET, cell
 
 ROOT = Path(__file__).resolve().parents[1]
 SPEC = """

@@ -22,8 +22,9 @@ import yaml
 
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.studies.sweep import cli as sweep_cli
-from vjm_ros.studies.sweep.engine import RESULTS_CSV, Engine, write_parquet
+from vjm_ros.studies.sweep.engine import Engine
 from vjm_ros.studies.sweep.spec import SpecError, load_spec, parse_spec
+from vjm_ros.studies.sweep.table import RESULTS_CSV, write_parquet
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("*.yaml"))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from vjm_ros.studies.sweep.engine import RESULTS_CSV
+from vjm_ros.studies.sweep.table import RESULTS_CSV
 from vjm_ros.studies.sweep.tune import choose, read_rows
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,8 +15,9 @@ import sys
 from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError, SceneError
-from vjm_ros.studies.sweep.engine import CLUSTER_TIMEOUT, RESULTS_CSV, Engine, Sweep
+from vjm_ros.studies.sweep.engine import CLUSTER_TIMEOUT, Engine, Sweep
 from vjm_ros.studies.sweep.spec import check_value, load_spec
+from vjm_ros.studies.sweep.table import RESULTS_CSV
 
 EXIT_ALL_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 1, 2, 130
 

@@ -32,16 +32,12 @@ from vjm_ros.studies.sweep.plan import plan_sweep
 from vjm_ros.studies.sweep.run import MEASURES, case_duration, case_scene, case_settings
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
 from vjm_ros.studies.sweep.table import (
-    RESULTS_CSV,
     RESULTS_PARQUET,
     begin_table,
     cell,
     inspect_table,
     write_parquet,
 )
-
-__all__ = ["CLUSTER_TIMEOUT", "RESULTS_CSV", "RESULTS_PARQUET", "Engine", "Sweep",
-           "check_scheduler", "run_sweep", "write_parquet"]
 
 CLUSTER_TIMEOUT = 10.0
 """Default longest wait, s, for ``--cluster``'s scheduler to accept the connection and answer."""
