@@ -15,6 +15,7 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import pytest
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
@@ -79,12 +80,18 @@ def imported_modules() -> dict[str, set[str]]:
     return found
 
 
-def test_every_imported_distribution_is_declared():
+@pytest.fixture(scope="module")
+def imported() -> dict[str, set[str]]:
+    """:func:`imported_modules` of the checkout, parsed once for the two tests that read it."""
+    return imported_modules()
+
+
+def test_every_imported_distribution_is_declared(imported):
     declared = setup_py_requirements()
     ros = package_xml_depends()
     providers = md.packages_distributions()
     undeclared = []
-    for module, files in sorted(imported_modules().items()):
+    for module, files in sorted(imported.items()):
         if module in ros:
             continue
         dists = {canonicalize_name(d) for d in providers.get(module, [])}
@@ -94,7 +101,7 @@ def test_every_imported_distribution_is_declared():
     assert not undeclared, "imported but not in setup.py or package.xml: " + "; ".join(undeclared)
 
 
-def test_the_check_sees_the_imports_it_judges():
+def test_the_check_sees_the_imports_it_judges(imported):
     """Direct imports count, also inside functions and ``from`` imports; guarded ones and the
     standard library do not (else the test above could pass by finding nothing)."""
     source = """
@@ -117,6 +124,6 @@ def compress(data):
         pass
 """
     assert imports_of(source) == {"numpy", "mcap", "lz4", "yaml"}
-    modules = imported_modules()
+    modules = imported
     assert "vjm_ros/logs/mcap_block.py" in modules["zstandard"]
     assert "vjm_ros/logs/mcap_block.py" in modules["lz4"]
