@@ -48,8 +48,8 @@ def vjm_model_here(*args: str) -> subprocess.CompletedProcess:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
             code = cli.main(["model", *args])
-        except SystemExit as exc:  # argparse's refusals and --help
-            code = exc.code if isinstance(exc.code, int) else 1
+        except SystemExit as exc:  # argparse's refusals; the code as Python's exit makes it
+            code = 0 if exc.code is None else exc.code if isinstance(exc.code, int) else 1
     return subprocess.CompletedProcess(["vjm", "model", *args], code, out.getvalue(),
                                        err.getvalue())
 
