@@ -61,15 +61,15 @@ def test_per_tick_encoding_cost(benchmark, run, path, kind):
     s, ns = samples[-1], 1_234_567_890
     names = scene.model.joint_names
     if kind == "joint_state":
-        fast = cdr.joint_state_encoder(names)
+        fast = cdr.joint_state_layout(names).encode
         args, slow = (ns, s.q, s.qd, s.effort), (messages.JOINT_STATE,
                                                   messages.joint_state(names, s, ns))
     elif kind == "markers":
         value = messages.markers(s, ns)
         fast, args, slow = cdr.encode_markers, (value,), (messages.MARKER_ARRAY, value)
     else:
-        fast = cdr.wrench_stamped_encoder()
-        args, slow = (ns, *s.closure_force[0]), (messages.WRENCH_STAMPED,
+        fast = cdr.wrench_stamped_layout().encode
+        args, slow = (ns, s.closure_force[0, :2], s.closure_force[0, 2:]), (messages.WRENCH_STAMPED,
                                                  messages.wrench(s, 0, ns))
     if path == "fast_path":
         benchmark(fast, *args)

@@ -207,17 +207,17 @@ def test_fast_encoders_equal_rosbags_serializer(run):
     """The per-tick fast paths write what rosbags' serializer writes."""
     scene, _, first, _ = run
     model, s, ns = scene.model, first[-1], 1_234_567_890_123
-    js = cdr.joint_state_encoder(model.joint_names)(ns, s.q, s.qd, s.effort)
+    js = cdr.joint_state_layout(model.joint_names).encode(ns, s.q, s.qd, s.effort)
     assert js == serialize(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns))
     layout = messages.labelled_layout(model.closure_names, 3)
-    fa = cdr.multi_array_encoder(layout, 3 * len(model.closures))(s.closure_force.reshape(-1))
+    fa = cdr.multi_array_layout(layout, 3 * len(model.closures)).encode(0, s.closure_force)
     assert fa == serialize(
         messages.FLOAT64_MULTI_ARRAY, messages.constraint_forces(model.closure_names, s)
     )
-    fx, fy, mz = s.closure_force[0]
-    w = cdr.wrench_stamped_encoder()(ns, fx, fy, mz)
+    f = s.closure_force[0]
+    w = cdr.wrench_stamped_layout().encode(ns, f[:2], f[2:])
     assert w == serialize(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns))
-    assert cdr.encode_clock(ns) == serialize(messages.CLOCK, messages.clock(ns))
+    assert cdr.CLOCK_LAYOUT.encode(ns) == serialize(messages.CLOCK, messages.clock(ns))
 
 
 def test_rclpy_decodes_the_encoded_messages(run):
@@ -248,7 +248,7 @@ def test_rclpy_decodes_the_encoded_messages(run):
     )
     w = decode(encoded(messages.WRENCH_STAMPED, messages.wrench(s, 0, ns)), WrenchStamped)
     assert w.wrench.force.y == s.closure_force[0, 1]
-    assert decode(cdr.encode_clock(ns), Clock).clock.nanosec == 1
+    assert decode(cdr.CLOCK_LAYOUT.encode(ns), Clock).clock.nanosec == 1
     assert decode(encoded(messages.STRING, messages.event("reset")), String).data == "reset"
     ma = decode(encoded(messages.MARKER_ARRAY, messages.markers(s, ns)), MarkerArray)
     assert [m.type for m in ma.markers] == [5, 7, 0]
@@ -317,17 +317,17 @@ def test_a_signal_during_a_write_takes_effect_when_the_write_returns(run, tmp_pa
     scene, sim, first, _ = run
     path = tmp_path / "atomic.mcap"
     rec = McapRecorder(path, scene.model, sim.describe(), scene.text)
-    original = rec._put
+    original = rec._add_run
     sent = []
 
-    def put_with_a_signal(*args):
-        if not sent:  # SIGTERM between the first and the second message of a tick
+    def add_with_a_signal(*args):
+        if not sent:  # SIGTERM after the tick is encoded, before its messages are added
             sent.append(True)
             os.kill(os.getpid(), signal.SIGTERM)
             time.sleep(0.05)  # the handler runs here: it must not raise inside the write
         return original(*args)
 
-    rec._put = put_with_a_signal
+    rec._add_run = add_with_a_signal
     with pytest.raises(SystemExit) as exc, finalize_on_signals(), rec:
         rec.write(first[0])
         raise AssertionError("the signal should end the block after the write")

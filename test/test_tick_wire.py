@@ -157,8 +157,8 @@ def _same_but_padding(ours: bytes, theirs: bytes) -> bool:
 
 @pytest.mark.parametrize("scene_name", ["three_chain", "pendulum"])
 def test_node_bytes_are_the_logs_bytes_rosbags_and_rclpy(scene_name):
-    """The node's per-tick bytes come from the logs' layouts: along a run they equal the logs'
-    encoders and rosbags' serializer byte for byte, and rclpy's ``serialize_message`` in every
+    """The node's per-tick bytes come from the logs' layouts: along a run they equal the
+    layouts' own encoding and rosbags' serializer byte for byte, and rclpy's ``serialize_message`` in every
     byte but padding (the one difference from rosbags: an empty ``Float64MultiArray.data``,
     which rclpy pads to 8 bytes)."""
     from rosbags_cdr import TYPESTORE, build  # the tests' own rosbags message builder
@@ -176,18 +176,20 @@ def test_node_bytes_are_the_logs_bytes_rosbags_and_rclpy(scene_name):
         ns = messages.seconds_to_ns(t)
         logs = [
             (wire.joint_state(t, s.q, s.qd, s.effort),
-             cdr.joint_state_encoder(model.joint_names)(ns, s.q, s.qd, s.effort),
+             cdr.joint_state_layout(model.joint_names).encode(ns, s.q, s.qd, s.effort),
              rosbags(messages.JOINT_STATE, messages.joint_state(model.joint_names, s, ns)),
              conv.joint_state(model.joint_names, t, s.q, s.qd, s.effort)),
             (wire.energy_values(s.energy),
-             cdr.multi_array_encoder(messages.labelled_layout(messages.ENERGY_LABELS, 1), 4)(
-                 s.energy),
+             cdr.multi_array_layout(messages.labelled_layout(messages.ENERGY_LABELS, 1), 4).encode(
+                 0, s.energy),
              rosbags(messages.FLOAT64_MULTI_ARRAY, messages.energy(s)),
              conv.energy(energy_layout, s.energy)),
-            (wire.clock_at(t), cdr.encode_clock(ns), rosbags(messages.CLOCK, messages.clock(ns)),
+            (wire.clock_at(t), cdr.CLOCK_LAYOUT.encode(ns),
+             rosbags(messages.CLOCK, messages.clock(ns)),
              conv.clock(t)),
         ]
-        logs += [(wire.wrench(i, force, t), cdr.wrench_stamped_encoder()(ns, *force),
+        logs += [(wire.wrench(i, force, t), cdr.wrench_stamped_layout().encode(ns, force[:2],
+                                                                               force[2:]),
                   rosbags(messages.WRENCH_STAMPED, messages.wrench(s, i, ns)),
                   conv.wrench(force, t)) for i, force in enumerate(s.closure_force)]
         for raw, log, theirs, fresh in logs:

@@ -3,14 +3,10 @@
 Each message of every tick (``JointState``, the two ``Float64MultiArray``, ``WrenchStamped``,
 ``Clock`` and the decimated ``MarkerArray``) has one byte layout here, a :class:`FixedLayout`
 written by :class:`CdrWriter`: its bytes with zero stamps and numbers and the offsets of both.
-The node refills a copy of it in place (:class:`vjm_ros.ros.wire.TickWire`,
-:class:`vjm_ros.ros.wire.MarkerWire`, published as bytes), the recorder packs one message
-(:attr:`FixedLayout.packer`, behind :func:`joint_state_encoder` and its siblings) or a whole
-block (:mod:`vjm_ros.logs.mcap_block`); the events' ``String`` is :func:`encode_string`.
-Measured here in one run (``pytest -m bench test/bench_logging.py``): a JointState of three
-joints costs 1.7 us on its fast path against 12-14 us through rosbags' schema-driven serializer
-from the dict, a WrenchStamped 0.4 us against 12-17 us, the four-bar's MarkerArray 29 us
-against 140-155 us. test/test_cdr_rosbags.py checks every layout against rosbags and rclpy
+The node refills a copy of it in place (:class:`vjm_ros.ros.wire.TickWire`, published as
+bytes); :meth:`FixedLayout.encode` writes one message (the node's markers, a log's first
+sample), :mod:`vjm_ros.logs.mcap_block` a whole block of them; the events' ``String`` is
+:func:`encode_string`. test/test_cdr_rosbags.py checks every layout against rosbags and rclpy
 byte for byte. CDR layout, for reading the code: every
 primitive is aligned to its size, counted from the end of the 4-byte encapsulation header;
 strings are a ``uint32`` length that counts the terminating NUL, then the bytes and the NUL;
@@ -19,9 +15,8 @@ sequences are a ``uint32`` count, then the elements.
 
 from __future__ import annotations
 
-import functools
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -183,17 +178,12 @@ STAMP = struct.Struct("<iI")
 NS_PER_S = 1_000_000_000
 
 
-def _floats(values) -> list[float]:
-    """``values`` (array-like of numbers) as a list of Python floats."""
-    return np.asarray(values, dtype=np.float64).tolist()
-
-
 @dataclass(frozen=True)
 class FixedLayout:
     """The one byte layout of a per-tick message: its bytes with zero stamps and numbers, and
     where the stamps and numbers go. The node refills a copy in place
-    (:class:`vjm_ros.ros.wire.TickWire`), the logs pack one message (:attr:`packer`) or many at once
-    (:mod:`vjm_ros.logs.mcap_block`).
+    (:class:`vjm_ros.ros.wire.TickWire`); :meth:`encode` writes one message, and
+    :mod:`vjm_ros.logs.mcap_block` many at once.
 
     Attributes
     ----------
@@ -203,32 +193,29 @@ class FixedLayout:
         Byte offsets of the header stamps (``int32`` sec, ``uint32`` nanosec), all of which
         carry the message's time.
     arrays : tuple of (int, int)
-        ``(byte offset, count)`` of each run of ``float64`` values, in the order of the
-        per-message encoder's arguments.
+        ``(byte offset, count)`` of each run of ``float64`` values, in the order of
+        :meth:`encode`'s arguments.
     """
 
     template: bytes
     stamps: tuple[int, ...]
     arrays: tuple[tuple[int, int], ...]
 
-    @functools.cached_property
-    def packer(self) -> tuple[struct.Struct, tuple[bytes, ...]]:
-        """The whole message as one ``struct`` and its constant pieces, for one-call encoders.
+    def encode(self, ns: int, *runs) -> bytes:
+        """The message stamped ``ns`` (ns since the epoch of the run's clock) with the values of
+        ``runs`` (one array-like per run of :attr:`arrays`, in order).
 
-        The format holds, in byte order, a constant piece (``s``), a stamp (``iI``) or a run
-        (``d`` per value), ..., a last constant piece: ``pack(c0, sec, nanosec, c1, *run, ...)``
-        with ``c0, c1, ...`` the pieces returned writes the message. The stamps come before the
-        runs in every layout built here but :func:`markers_layout`'s (refilled in place).
+        One message at a time (the first sample of a log, the node's markers); many at once:
+        :mod:`vjm_ros.logs.mcap_block`.
         """
-        fields = sorted([(at, 8, "iI") for at in self.stamps]
-                        + [(offset, 8 * count, f"{count}d") for offset, count in self.arrays])
-        fmt, pieces, pos = "<", [], 0
-        for at, size, code in fields:
-            pieces.append(self.template[pos:at])
-            fmt += f"{at - pos}s{code}"
-            pos = at + size
-        pieces.append(self.template[pos:])
-        return struct.Struct(fmt + f"{len(self.template) - pos}s"), tuple(pieces)
+        data = bytearray(self.template)
+        sec, nanosec = divmod(int(ns), NS_PER_S)
+        for at in self.stamps:
+            STAMP.pack_into(data, at, sec, nanosec)
+        out = np.frombuffer(data, dtype=np.uint8)
+        for (offset, count), values in zip(self.arrays, runs, strict=True):
+            out[offset : offset + 8 * count].view("<f8")[:] = np.ravel(values)
+        return bytes(data)
 
 
 def _stamped(w: CdrWriter, frame_id: str) -> list[int]:
@@ -296,90 +283,11 @@ CLOCK_LAYOUT = FixedLayout(_ENCAPSULATION + bytes(8), (STAMP_OFFSET,), ())
 """``rosgraph_msgs/Clock``: its stamp only."""
 
 
-def joint_state_encoder(
-    names: Sequence[str], frame_id: str = "world"
-) -> Callable[[int, np.ndarray, np.ndarray, np.ndarray], bytes]:
-    """Encoder of ``sensor_msgs/JointState`` messages for a fixed list of joints
-    (:func:`joint_state_layout`).
-
-    Parameters
-    ----------
-    names : sequence of str
-        Joint names (their number fixes the array lengths).
-    frame_id : str
-
-    Returns
-    -------
-    callable
-        ``f(ns, position, velocity, effort) -> bytes`` with arrays of shape (len(names),); the
-        result equals :func:`encode` of the corresponding dict.
-    """
-    packer, pieces = joint_state_layout(names, frame_id).packer
-    pack = packer.pack
-    if not names:
-        c0, c1 = pieces
-        return lambda ns, position, velocity, effort: pack(c0, *divmod(int(ns), NS_PER_S), c1)
-    c0, c1, c2, c3, c4 = pieces
-
-    def encode_joint_state(ns: int, position, velocity, effort) -> bytes:
-        sec, nanosec = divmod(int(ns), NS_PER_S)
-        # Python floats: struct takes them several times faster than numpy's scalars
-        return pack(c0, sec, nanosec, c1, *_floats(position), c2, *_floats(velocity), c3,
-                    *_floats(effort), c4)
-
-    return encode_joint_state
-
-
-def multi_array_encoder(layout: dict, size: int) -> Callable[[np.ndarray], bytes]:
-    """Encoder of ``std_msgs/Float64MultiArray`` messages with a fixed layout and length
-    (:func:`multi_array_layout`).
-
-    Returns
-    -------
-    callable
-        ``f(data) -> bytes`` with ``data`` of shape (size,).
-    """
-    fixed = multi_array_layout(layout, size)
-    if not size:
-        return lambda data: fixed.template
-    packer, (c0, c1) = fixed.packer
-    pack = packer.pack
-    return lambda data: pack(c0, *_floats(data), c1)
-
-
-def wrench_stamped_encoder(frame_id: str = "world") -> Callable[[int, float, float, float], bytes]:
-    """Encoder of planar ``geometry_msgs/WrenchStamped`` messages (:func:`wrench_stamped_layout`).
-
-    Returns
-    -------
-    callable
-        ``f(ns, fx, fy, mz) -> bytes``: force ``(fx, fy, 0)`` N, torque ``(0, 0, mz)`` N m.
-    """
-    packer, (c0, c1, c2, c3) = wrench_stamped_layout(frame_id).packer
-    pack = packer.pack
-
-    def encode_wrench(ns: int, fx: float, fy: float, mz: float) -> bytes:
-        sec, nanosec = divmod(int(ns), NS_PER_S)
-        return pack(c0, sec, nanosec, c1, fx, fy, c2, mz, c3)
-
-    return encode_wrench
-
-
-_CLOCK = CLOCK_LAYOUT.packer[0].pack
-_CLOCK_PIECES = CLOCK_LAYOUT.packer[1]
-
-
 def encode_string(text: str) -> bytes:
     """``std_msgs/String`` holding ``text`` (the events)."""
     w = CdrWriter()
     w.string(text)
     return w.getvalue()
-
-
-def encode_clock(ns: int) -> bytes:
-    """``rosgraph_msgs/Clock`` at ``ns`` nanoseconds (:data:`CLOCK_LAYOUT`)."""
-    sec, nanosec = divmod(int(ns), NS_PER_S)
-    return _CLOCK(_CLOCK_PIECES[0], sec, nanosec, _CLOCK_PIECES[1])
 
 
 def markers_layout(message: dict) -> FixedLayout:

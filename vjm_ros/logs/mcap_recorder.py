@@ -58,6 +58,7 @@ from vjm_ros.logs import (
     rosbag2,
     tick_of,
 )
+from vjm_ros.sim.samples import SampleBlock
 
 INDEX_BYTES_PER_HOUR = 16 * 2**20
 """Bound on what the writer keeps until the file is finalized, per recorded hour at 1 kHz with
@@ -181,24 +182,11 @@ class McapRecorder(Recorder):
         self._prepare_encoders()
 
     def _prepare_encoders(self) -> None:
-        """Fixed-layout encoders and channel ids of the per-tick topics."""
-        t, k = self.topics, len(self._force_names)
-        self._enc_joints = cdr.joint_state_encoder(self._joint_names, messages.FRAME_ID)
-        self._enc_forces = cdr.multi_array_encoder(
-            messages.labelled_layout(self._force_names, len(messages.FORCE_COMPONENTS)), 3 * k
-        )
-        self._enc_energy = cdr.multi_array_encoder(
-            messages.labelled_layout(messages.ENERGY_LABELS, 1), len(messages.ENERGY_LABELS)
-        )
-        self._enc_wrench = cdr.wrench_stamped_encoder(messages.FRAME_ID)
-        self._ch_joints = self._channels[t.joint_states]
-        self._ch_truth = self._channels.get(t.ground_truth_joint_states)
-        self._ch_forces = self._channels[t.constraint_forces]
-        self._ch_energy = self._channels[t.energy]
-        self._ch_clock = self._channels[t.clock]
-        self._ch_wrench = [self._channels[t.wrench(name)] for name in self._force_names]
+        """The encoder of the per-tick messages (and markers), for blocks of ticks."""
         self._block_encoder = mcap_block.BlockEncoder(
-            self.model, self._channels, t, self.marker_every, messages.FORCE_SCALE, self.measured)
+            self.model, self._channels, self.topics, self.marker_every, messages.FORCE_SCALE,
+            self.measured)
+        self._one = SampleBlock(self.model, 1)  # what write() writes
 
     @staticmethod
     def _library() -> str:
@@ -255,36 +243,22 @@ class McapRecorder(Recorder):
 
     @atomic
     def write(self, sample) -> None:
-        """Log one tick's :class:`~vjm_ros.sim.samples.Sample`."""
-        self._check_open()
-        ns = self.timebase.to_ns(sample.t)
-        put = self._put
-        if self.measured:
-            m = sample.measured
-            put(self._ch_joints, self._enc_joints(ns, m[0], m[1], m[2]), ns)
-            put(self._ch_truth, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
-        else:
-            put(self._ch_joints, self._enc_joints(ns, sample.q, sample.qd, sample.effort), ns)
-        forces = sample.closure_force.tolist()
-        put(self._ch_forces, self._enc_forces([v for f in forces for v in f]), ns)
-        for channel, (fx, fy, mz) in zip(self._ch_wrench, forces, strict=True):
-            put(channel, self._enc_wrench(ns, fx, fy, mz), ns)
-        put(self._ch_energy, self._enc_energy(sample.energy.tolist()), ns)
-        put(self._ch_clock, cdr.encode_clock(ns), ns)
-        if self.marker_every > 0 and self.samples % self.marker_every == 0:
-            markers = messages.markers(sample, ns)
-            self._put(self._channels[self.topics.markers], cdr.encode_markers(markers), ns)
-            self._block_encoder.lay_out_markers(markers)
-        self.samples += 1
-        self._maybe_flush(ns)
+        """Log one tick's :class:`~vjm_ros.sim.samples.Sample`: a block of one row
+        (:meth:`write_block`)."""
+        one = self._one
+        one.put(0, sample)
+        one.effort = sample.effort
+        one.measured = None if sample.measured is None else sample.measured[None]
+        one.rows = 1
+        self.write_block(one)
 
     @atomic
     def write_block(self, block) -> None:
         """Log every row of a :class:`~vjm_ros.sim.samples.SampleBlock`, encoded in bulk.
 
-        The messages, their times, sequence numbers and order equal those of :meth:`write` of
-        each row, and chunks close after the same ticks, except that the wall-time condition of
-        ``chunk_seconds`` is checked once per block.
+        The messages, their times, sequence numbers and order do not depend on how the ticks
+        are split into blocks, and chunks close after the same ticks (:meth:`_chunk_stop`),
+        except that the wall-time condition of ``chunk_seconds`` is checked once per block.
         """
         self._check_open()
         rows = len(block)
@@ -312,8 +286,8 @@ class McapRecorder(Recorder):
 
     def _chunk_stop(self, ns: np.ndarray, start: int) -> tuple[int, bool]:
         """End (exclusive) of the ticks from ``start`` that go into the open chunk, and whether
-        the chunk closes after them: at the first tick ``chunk_seconds`` after the chunk's
-        first, as :meth:`_maybe_flush` decides tick by tick."""
+        the chunk closes after them: at the first tick ``chunk_seconds`` of simulated time after
+        the chunk's first."""
         first = start
         if self._chunk_start_ns is None:
             self._chunk_start_ns = int(ns[start])
@@ -361,15 +335,6 @@ class McapRecorder(Recorder):
         self._check_open()
         ns, text = self._reset_event(t, tick)
         self._event(text, ns)
-
-    def _maybe_flush(self, ns: int) -> None:
-        if self._chunk_start_ns is None:
-            self._chunk_start_ns = ns
-            return
-        if ns - self._chunk_start_ns >= self.chunk_ns or (
-            time.monotonic() - self._chunk_wall >= self.chunk_seconds
-        ):
-            self.flush()
 
     def flush(self) -> None:
         """Close the current chunk and hand it to the operating system."""

@@ -80,8 +80,7 @@ class TickWire:
                 _pack_stamp(data, _AT, sec, nanosec)
 
     def joint_state(self, t: float, q: np.ndarray, qd: np.ndarray, effort: np.ndarray) -> bytes:
-        """Serialized ``joint_states`` (as :func:`~vjm_ros.ros.conversions.joint_state`;
-        t in s, q, qd, effort shape (n,))."""
+        """Serialized ``joint_states`` (t in s, q, qd, effort shape (n,))."""
         self.set_time(t)
         self._q[:] = q
         self._qd[:] = qd
@@ -114,14 +113,14 @@ class TickWire:
 class MarkerWire:
     """``~/markers`` as serialized CDR, refilled in place of a template.
 
-    Built as rclpy messages (:func:`~vjm_ros.ros.conversions.markers`: a ``Point`` object per
-    point) and serialized by ``publish``, the markers of three_chain with its tip traces (205
-    points) took 1.4 ms of the tick loop, longer than a tick at 1 kHz: at 30 Hz the loop was
-    late some 30 times a second. The message keeps its layout while the markers keep their
-    kinds and point counts (the tip traces have a constant length,
-    :class:`~vjm_ros.ros.conversions.TipTrace`); this class writes the template once per layout
-    with the logs' encoder (:func:`vjm_ros.logs.cdr.markers_layout`, checked against rosbags
-    byte for byte) and then only the stamps and the points.
+    Built as rclpy messages (a ``Point`` object per point) and serialized by ``publish``, the
+    markers of three_chain with its tip traces (205 points) took 1.4 ms of the tick loop, longer
+    than a tick at 1 kHz: at 30 Hz the loop was late some 30 times a second. The message keeps
+    its layout while the markers keep their kinds and point counts (the tip traces have a
+    constant length, :class:`~vjm_ros.ros.conversions.TipTrace`); this class makes the layout
+    once per change with the logs' encoder (:func:`vjm_ros.logs.cdr.markers_layout`, checked
+    against rosbags byte for byte) and then writes only the stamps and the points
+    (:meth:`~vjm_ros.logs.cdr.FixedLayout.encode`).
 
     Parameters
     ----------
@@ -136,7 +135,7 @@ class MarkerWire:
 
     def markers(self, sample, t: float, trace: Sequence[np.ndarray] = ()) -> bytes:
         """Serialized ``visualization_msgs/MarkerArray`` of ``sample`` stamped ``t`` (s), with the
-        tip traces ``trace`` (as :func:`~vjm_ros.ros.conversions.markers`)."""
+        tip traces ``trace``."""
         specs = layouts.marker_specs(sample, self.force_scale, trace=trace)
         key = tuple((ns, i, kind, len(points), scale, rgba)
                     for ns, i, kind, points, scale, rgba in specs)
@@ -144,13 +143,5 @@ class MarkerWire:
             self._layout = cdr.markers_layout(
                 layouts.markers(sample, 0, self.force_scale, trace=trace))
             self._key = key
-        layout = self._layout
-        data = bytearray(layout.template)
-        sec, nanosec = divmod(layouts.seconds_to_ns(t), 1_000_000_000)
-        for at in layout.stamps:
-            _pack_stamp(data, at, sec, nanosec)
-        out = np.frombuffer(data, dtype=np.uint8)
-        for (start, count), spec in zip(layout.arrays, specs, strict=True):
-            xyz = out[start : start + 8 * count].view("<f8").reshape(-1, 3)
-            xyz[:, :2] = spec[3]  # z stays 0.0, as in the template
-        return bytes(data)
+        points = [np.column_stack((spec[3], np.zeros(len(spec[3])))) for spec in specs]
+        return self._layout.encode(layouts.seconds_to_ns(t), *points)  # z stays 0.0
