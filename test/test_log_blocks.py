@@ -1,7 +1,11 @@
-"""Logs written block by block (``write_block``, as ``vjm run`` writes them) hold exactly what the
-same ticks written sample by sample (``write``, the node's path) hold.
+"""Logs written in blocks of any size (``write_block``: ``vjm run``'s blocks of 1000 ticks, the
+node's of up to 100) hold exactly what the same ticks written one at a time (``write``, a block
+of one row) hold, and the MCAP records are rosbags' bytes.
 
-The oracle is the per-sample path of each recorder. Scenes: the four-bar, a slider closure
+Oracles: the same ticks in blocks of one row, for everything that depends on how ticks are split
+into blocks (chunks, batches, sequence numbers, decimation of the markers and the geometry), and
+rosbags' serializer for the MCAP records themselves (the rerun recording's content is held to
+rerun's own reader in test_rerun_recorder.py). Scenes: the four-bar, a slider closure
 (double_slider), two hinge closures meeting at one pin (three_chain) and a hinge plus an angle
 closure (the four-bar with its crank locked), so every closure kind and several closures at once
 are covered. Equality is exact: the same times and the same doubles.

@@ -28,6 +28,7 @@ import numpy as np
 
 from vjm_ros.logs import events
 from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
+from vjm_ros.sim.samples import SampleBlock
 
 if TYPE_CHECKING:
     from vjm_ros.logs.mcap_recorder import McapRecorder
@@ -73,6 +74,21 @@ class Recorder:
     def _finalize(self) -> None:
         """Write what is pending and release the sink (called once by :meth:`close`)."""
         raise NotImplementedError
+
+    _one = None  # the block of one row that write() fills
+
+    @atomic
+    def write(self, sample) -> None:
+        """Log one tick's :class:`~vjm_ros.sim.samples.Sample`: a block of one row
+        (``write_block``, which the subclasses implement)."""
+        if self._one is None:
+            self._one = SampleBlock(self.model, 1)
+        one = self._one
+        one.put(0, sample)
+        one.effort = sample.effort
+        one.measured = None if sample.measured is None else sample.measured[None]
+        one.rows = 1
+        self.write_block(one)
 
     def reserve(self, block_ticks: int) -> None:
         """Make ready, now, the memory that writing blocks of ``block_ticks`` rows will use

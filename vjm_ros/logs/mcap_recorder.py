@@ -58,7 +58,6 @@ from vjm_ros.logs import (
     rosbag2,
     tick_of,
 )
-from vjm_ros.sim.samples import SampleBlock
 
 INDEX_BYTES_PER_HOUR = 16 * 2**20
 """Bound on what the writer keeps until the file is finalized, per recorded hour at 1 kHz with
@@ -186,7 +185,6 @@ class McapRecorder(Recorder):
         self._block_encoder = mcap_block.BlockEncoder(
             self.model, self._channels, self.topics, self.marker_every, messages.FORCE_SCALE,
             self.measured)
-        self._one = SampleBlock(self.model, 1)  # what write() writes
 
     @staticmethod
     def _library() -> str:
@@ -240,17 +238,6 @@ class McapRecorder(Recorder):
 
     def _event(self, text: str, ns: int) -> None:
         self._put(self._channels[self.topics.events], cdr.encode_string(text), ns)
-
-    @atomic
-    def write(self, sample) -> None:
-        """Log one tick's :class:`~vjm_ros.sim.samples.Sample`: a block of one row
-        (:meth:`write_block`)."""
-        one = self._one
-        one.put(0, sample)
-        one.effort = sample.effort
-        one.measured = None if sample.measured is None else sample.measured[None]
-        one.rows = 1
-        self.write_block(one)
 
     @atomic
     def write_block(self, block) -> None:

@@ -329,31 +329,6 @@ class RerunRecorder(Recorder):
 
     # ------------------------------------------------------------------ writing
     @atomic
-    def write(self, sample) -> None:
-        """Buffer one tick's :class:`~vjm_ros.sim.samples.Sample`; send when full or old."""
-        self._check_open()
-        ns = self.timebase.to_ns(sample.t)
-        i = self._count
-        self._t[i] = ns
-        self._q[i] = sample.q
-        self._qd[i] = sample.qd
-        self._force[i] = sample.closure_force
-        self._energy[i] = sample.energy
-        self._error[i] = sample.closure_error
-        if self.measured:
-            self._measured[i] = sample.measured
-        self._count = i + 1
-        if self.samples % self.geometry_every == 0:
-            self._geo.append((np.array([ns]), sample.segments[None], sample.points[None],
-                              sample.closure_points[None], sample.closure_force[None]))
-            if ns >= self._next_cyclograph_ns:
-                self._cyc.append((np.array([ns]), sample.segments[None]))
-                self._next_cyclograph_ns = ns + self.cyclograph_ns
-        self.samples += 1
-        if self._count == self.batch or time.monotonic() - self._last_send >= self.batch_seconds:
-            self.send()
-
-    @atomic
     def write_block(self, block) -> None:
         """Buffer every row of a :class:`~vjm_ros.sim.samples.SampleBlock` by array slices.
 
