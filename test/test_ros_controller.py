@@ -24,7 +24,8 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from vjm_ros.core.constraints import ExactClosure  # noqa: E402
-from vjm_ros.ros.controller import FiveBarGeometry, make_law, tip_position  # noqa: E402
+from vjm_ros.core.readers import forward_kinematics  # noqa: E402
+from vjm_ros.ros.controller import FiveBarGeometry, make_law  # noqa: E402
 from vjm_ros.ros.conversions import joint_arrays, seconds  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 from vjm_ros.scene.loader import load_scene  # noqa: E402
@@ -35,6 +36,13 @@ MODEL = load_scene("five_bar").model
 CENTER, RADIUS, PERIOD, APPROACH = np.array([0.7071, 0.5]), 0.1, 2.0, 1.0
 TRACKING_TOLERANCE = 0.005
 """Largest distance of the pin from the circle after 2 s, m."""
+
+
+def tip_position(model, q):
+    """Position of the first chain's tip (the pin) at ``q``, m, shape (2,)."""
+    last = model.chains[0].links[-1]
+    kin = forward_kinematics(model, q)
+    return kin.origin[last] + model.length[last] * kin.rotation[last, :, 0]
 
 
 def circle_points(count=12):

@@ -290,14 +290,6 @@ def make_law(model: Model, q_start: np.ndarray, center=(0.7071, 0.5), radius: fl
     return PdGravityLaw(model, trajectory, kp, kd)
 
 
-def tip_position(model: Model, q: np.ndarray) -> np.ndarray:
-    """Position of the first chain's tip (the pin) at ``q``, m, shape (2,)."""
-    chain = model.chains[0]
-    kin = forward_kinematics(model, q)
-    last = chain.links[-1]
-    return kin.origin[last] + model.length[last] * kin.rotation[last, :, 0]
-
-
 # ---------------------------------------------------------------------------------------------
 # 4. The ROS node: joint states in, effort commands out (keep this part for your controller)
 # ---------------------------------------------------------------------------------------------

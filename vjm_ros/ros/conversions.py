@@ -45,11 +45,6 @@ def seconds(msg_stamp: Time) -> float:
     return msg_stamp.sec + 1e-9 * msg_stamp.nanosec
 
 
-def nanoseconds(msg_stamp: Time) -> int:
-    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
-    return msg_stamp.sec * 1_000_000_000 + msg_stamp.nanosec
-
-
 def wrench_topic(closure: str) -> str:
     """Private topic of a closure's wrench, ``~/closures/<name>/wrench``."""
     return f"~/closures/{layouts.ros_name(closure)}/wrench"
