@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from vjm_ros.studies.sweep.engine import Engine, run_sweep
+from vjm_ros.studies.sweep.engine import Engine, Sweep
 from vjm_ros.studies.sweep.run import reference_for, run_case, scene_source
 from vjm_ros.studies.sweep.spec import parse_spec
 
@@ -49,7 +49,7 @@ def test_two_workers_against_a_serial_loop(tmp_path):
     for workers in (1, 2):
         with Engine(workers=workers) as engine:
             t0 = time.perf_counter()
-            result = run_sweep(spec, tmp_path / f"w{workers}", engine, progress=False)
+            result = Sweep(spec, tmp_path / f"w{workers}").run(engine, progress=False)
             walls[workers] = time.perf_counter() - t0
         assert result["run"] == 200
     figures = {

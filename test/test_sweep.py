@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.studies.sweep.engine import Engine, Sweep, run_sweep
+from vjm_ros.studies.sweep.engine import Engine, Sweep
 from vjm_ros.studies.sweep.run import MEASURES
 from vjm_ros.studies.sweep.spec import SpecError, load_spec, parse_spec
 from vjm_ros.studies.sweep.table import RESULTS_CSV, RESULTS_PARQUET, cell
@@ -93,14 +93,14 @@ def test_a_worker_address_is_refused_as_not_a_scheduler(engine):
 def test_unknown_scene_parameters_are_refused_before_any_run(engine, tmp_path):
     spec = parse_spec(SPEC.replace("zeta: [1.0]", "mass.knee: [1.0]"), "s.yaml")
     with pytest.raises(ConfigurationError, match="grid.mass.knee: expected a link of five_bar"):
-        run_sweep(spec, tmp_path, engine, progress=False)
+        Sweep(spec, tmp_path).run(engine, progress=False)
     assert not (tmp_path / RESULTS_CSV).exists()
 
 
 def test_every_case_is_a_row_and_the_same_spec_gives_the_same_numbers(engine, tmp_path):
     spec = parse_spec(SPEC, "small.yaml")
-    first = run_sweep(spec, tmp_path / "a", engine, progress=False)
-    run_sweep(spec, tmp_path / "b", engine, progress=False)
+    first = Sweep(spec, tmp_path / "a").run(engine, progress=False)
+    Sweep(spec, tmp_path / "b").run(engine, progress=False)
     assert first["rows"] == first["run"] == 8 and not first["interrupted"]
     a, b = rows_of(tmp_path / "a"), rows_of(tmp_path / "b")
     assert len({r["key"] for r in a}) == 8  # keyed by scene and settings
@@ -122,10 +122,10 @@ def test_every_case_is_a_row_and_the_same_spec_gives_the_same_numbers(engine, tm
 
 def test_resume_runs_only_the_missing_rows(engine, tmp_path):
     spec = parse_spec(SPEC, "small.yaml")
-    run_sweep(spec, tmp_path, engine, progress=False)
+    Sweep(spec, tmp_path).run(engine, progress=False)
     lines = (tmp_path / RESULTS_CSV).read_text().splitlines()
     (tmp_path / RESULTS_CSV).write_text("\n".join(lines[:4]) + "\n")  # header and three rows
-    again = run_sweep(spec, tmp_path, engine, resume=True, progress=False)
+    again = Sweep(spec, tmp_path, resume=True).run(engine, progress=False)
     assert (again["run"], again["skipped"]) == (5, 3)
     rows = rows_of(tmp_path)
     assert len(rows) == 8 and len({r["key"] for r in rows}) == 8
@@ -133,7 +133,7 @@ def test_resume_runs_only_the_missing_rows(engine, tmp_path):
 
 def test_a_resumed_table_keeps_to_the_spec_and_runs_error_rows_again(engine, tmp_path):
     spec = parse_spec(SPEC, "small.yaml")
-    run_sweep(spec, tmp_path, engine, progress=False)
+    Sweep(spec, tmp_path).run(engine, progress=False)
     table = tmp_path / RESULTS_CSV
     rows = rows_of(tmp_path)
     lost = next(r for r in rows if r["omega_n"] == "60" and r["status"] == "ok")
@@ -145,7 +145,7 @@ def test_a_resumed_table_keeps_to_the_spec_and_runs_error_rows_again(engine, tmp
              "message": "KilledWorker: lost"}
     table.write_text(text.replace(line, ",".join(error[k] for k in names)))
     shrunk = parse_spec(SPEC.replace("omega_n: [60, 5000]", "omega_n: [60]"), "small.yaml")
-    again = run_sweep(shrunk, tmp_path, engine, resume=True, progress=False)
+    again = Sweep(shrunk, tmp_path, resume=True).run(engine, progress=False)
     assert (again["dropped"], again["retried"], again["skipped"], again["run"]) == (4, 1, 3, 1)
     after = rows_of(tmp_path)
     assert sorted(r["key"] for r in after) == sorted(c.key for c in shrunk.cases())
@@ -163,7 +163,7 @@ def test_workers_elsewhere_run_a_scene_file_named_by_a_relative_path(engine, tmp
     Path("my_four_bar.yaml").write_text(load_scene("four_bar").text)
     spec = parse_spec("scenes: [my_four_bar.yaml]\nduration: 0.05\n"
                       "settings: {closure: exact}\n", "s.yaml")
-    result = run_sweep(spec, "out", engine, progress=False)
+    result = Sweep(spec, "out").run(engine, progress=False)
     rows = rows_of(tmp_path / "out")
     assert [r["status"] for r in rows] == ["ok"], rows
     assert float(rows[0]["position_deviation"]) >= 0  # the reference ran on a worker too
@@ -203,7 +203,7 @@ def test_every_example_spec_runs(engine, tmp_path):
     for path in sorted((ROOT / "examples").glob("*.yaml")):
         spec = load_spec(path)
         spec.duration, spec.reference = 0.02, False  # every row, briefly
-        result = run_sweep(spec, tmp_path / path.stem, engine, progress=False)
+        result = Sweep(spec, tmp_path / path.stem).run(engine, progress=False)
         assert result["run"] == result["rows"] == len(spec.cases())
         assert result["errors"] == 0, result
 
@@ -227,7 +227,7 @@ def test_scene_parameters_change_the_mechanism(engine, tmp_path):
     spec = parse_spec(
         "scenes: [four_bar]\nduration: 0.05\nsettings: {closure: exact}\nreference: false\n"
         "grid:\n  mass.crank: [1.0, 4.0]\n  initial.crank_joint: [0.0, 20.0]\n", "p.yaml")
-    run_sweep(spec, tmp_path, engine, progress=False)
+    Sweep(spec, tmp_path).run(engine, progress=False)
     rows = rows_of(tmp_path)
     assert len(rows) == 4 and all(r["status"] == "ok" for r in rows)
     drifts = {(r["mass.crank"], r["initial.crank_joint"]): float(r["energy_drift"]) for r in rows}

@@ -341,21 +341,6 @@ class Sweep:
         return refs
 
 
-def run_sweep(
-    spec: SweepSpec,
-    out: str | Path,
-    engine: Engine,
-    resume: bool = False,
-    progress: bool = True,
-) -> dict:
-    """Check ``spec``, then run every case not yet in ``out`` and write the table.
-
-    See :class:`Sweep` (the checks, before anything is written) and :meth:`Sweep.run` (the
-    summary returned).
-    """
-    return Sweep(spec, out, resume).run(engine, progress)
-
-
 def _run_batch(cases: list[Case], scene_text: tuple[str, str], reference) -> list[dict]:
     from vjm_ros.studies.sweep.run import run_case
 
