@@ -19,7 +19,17 @@ from vjm_ros.sim import float_text, trajectory
 from vjm_ros.sim.samples import SampleBlock
 from vjm_ros.sim.settings import SimulationSettings
 from vjm_ros.sim.simulator import Simulator
-from vjm_ros.sim.trajectory import Trajectory, csv_rows
+from vjm_ros.sim.trajectory import CsvStream, Trajectory
+
+
+def csv_rows(table: np.ndarray) -> str:
+    """CSV text of the rows of ``table`` as ``trajectory.csv`` formats them: compiled
+    (:func:`vjm_ros.sim.float_text.csv_bytes`) or by ``repr``, as the trajectory's writer picks."""
+    if len(table) == 0:
+        return ""
+    if trajectory._compiled_writer(len(table)):
+        return float_text.csv_bytes(table).decode("ascii")
+    return trajectory._repr_bytes(table).decode("ascii")
 
 
 def row_by_row(columns: list[str], table: np.ndarray) -> bytes:
@@ -71,7 +81,9 @@ def test_written_file_equals_the_row_by_row_writer(scene, tmp_path, monkeypatch,
         sim.advance_block(block, 50)
         traj.extend(block)
     monkeypatch.setattr(trajectory, "CSV_BATCH_ROWS", 64)  # 151 rows: three batches
-    path = traj.write_csv(tmp_path / "trajectory.csv")
+    path = tmp_path / "trajectory.csv"
+    with CsvStream(traj, path) as stream:
+        stream.catch_up()
     assert path.read_bytes() == row_by_row(traj.columns(), traj.table())
 
 

@@ -209,23 +209,12 @@ class Trajectory:
             parts.append(self["measured"][rows].transpose(0, 2, 1).reshape(count, -1))
         return np.concatenate(parts, axis=1)
 
-    def write_csv(self, path: str | Path) -> Path:
-        """Write ``trajectory.csv`` (full double precision).
-
-        Every value is written as ``repr(float(value))`` (the shortest text that reads back to the
-        same double), rows end with ``\\r\\n`` as :mod:`csv` writes them. The body is formatted
-        in batches of :data:`CSV_BATCH_ROWS` rows (:func:`csv_rows`), the same text as a row-by-row
-        :mod:`csv` writer (test/test_trajectory_csv.py).
-        """
-        with CsvStream(self, path) as stream:
-            stream.catch_up()
-        return Path(path)
-
 
 class CsvStream:
     """``trajectory.csv`` written while the trajectory grows: the header at once, then the rows
-    stored since the last :meth:`catch_up` at each call; the file is the one
-    :meth:`Trajectory.write_csv` writes at the end.
+    stored since the last :meth:`catch_up` at each call. Every value is written as
+    ``repr(float(value))`` (the shortest text that reads back to the same double), rows end with
+    ``\\r\\n`` as :mod:`csv` writes them (test/test_trajectory_csv.py).
 
     The compiled writer formats every batch into one buffer the stream keeps
     (:func:`vjm_ros.sim.float_text.csv_into`), which the file takes as it is: no fresh memory
@@ -290,22 +279,6 @@ CSV_BATCH_ROWS = 4096
 """Rows of ``trajectory.csv`` formatted at once (bounds the text held in memory, ~2 MB)."""
 
 
-def csv_rows(table: np.ndarray) -> str:
-    """CSV text of the rows of ``table``: values as ``repr(float(value))``, ``\\r\\n`` line ends.
-
-    Parameters
-    ----------
-    table : ndarray, shape (rows, columns)
-        At least one column.
-
-    Returns
-    -------
-    str
-        ``""`` for no rows (:func:`csv_bytes` as text).
-    """
-    return csv_bytes(table).decode("ascii")
-
-
 CSV_PLAIN_ROWS = 500
 """Tables of fewer rows are written by ``repr`` until the compiled writer is in use, where entry
 points start as plain Python (:mod:`vjm_ros.jit.tiers`): 500 rows of the thesis scenes take a
@@ -347,18 +320,3 @@ def _repr_bytes(table: np.ndarray) -> bytes:
     bracket or space): the compiled writer's text, without it."""
     text = repr(np.asarray(table, dtype=float).tolist())
     return (text[2:-2].replace("], [", "\r\n").replace(", ", ",") + "\r\n").encode("ascii")
-
-
-def csv_bytes(table: np.ndarray) -> bytes:
-    """CSV rows of ``table`` as ASCII bytes (see :func:`csv_rows`).
-
-    Compiled, :func:`vjm_ros.sim.float_text.csv_bytes` writes them (without holding the GIL);
-    else :func:`_repr_bytes`, the same text: while numba compiles the former in the background
-    (:mod:`vjm_ros.jit.tiers`), and for tables of fewer than :data:`CSV_PLAIN_ROWS` rows before
-    it is loaded.
-    """
-    if len(table) == 0:
-        return b""
-    if _compiled_writer(len(table)):
-        return float_text.csv_bytes(table)
-    return _repr_bytes(table)
