@@ -12,8 +12,8 @@ from vjm_ros.app.plotting import (
     FIGURE_NAMES,
     absolute_rates,
     chrono_cyclograph_figure,
-    displacements_figure,
     energy_figure,
+    kinematics_figure,
     write_figures,
 )
 from vjm_ros.scene.loader import builtin_scenes, load_scene
@@ -104,7 +104,7 @@ def test_absolute_rates_are_the_derivative_of_the_link_angles(four_bar):
 @pytest.mark.skipif("double_slider" not in builtin_scenes(), reason="no double_slider scene")
 def test_prismatic_joints_get_a_linear_panel(tmp_path):
     traj = simulate("double_slider", 300)
-    fig = displacements_figure(traj, "double_slider")
+    fig = kinematics_figure(traj, "double_slider", "displacements")
     angular, linear = fig.axes[:2]
     assert "(rad)" in angular.get_ylabel() and "(m)" in linear.get_ylabel()
     prismatic = [j.name for j in traj.model.joints if j.kind == "prismatic"]

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -104,8 +105,9 @@ def write_figures(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     name = title if title is not None else traj.model.name
-    builders = (chrono_cyclograph_figure, displacements_figure, velocities_figure,
-                accelerations_figure, constraint_forces_figure, energy_figure)
+    builders = (chrono_cyclograph_figure,
+                *(partial(kinematics_figure, kind=kind) for kind in _KINEMATICS),
+                constraint_forces_figure, energy_figure)
     paths = []
     for stem, build in zip(FIGURE_NAMES, builders, strict=True):
         with np.errstate(invalid="ignore", over="ignore"):
@@ -249,30 +251,6 @@ def _draw_ground(ax, ground) -> list:
     return handles
 
 
-def displacements_figure(traj: Trajectory, name: str) -> Figure:
-    """Absolute link angles and, when the scene has prismatic joints, the joint slides.
-
-    Arguments and result as :func:`chrono_cyclograph_figure`.
-    """
-    return _kinematics_figure(traj, name, "displacements")
-
-
-def velocities_figure(traj: Trajectory, name: str) -> Figure:
-    """Absolute angular velocities of the links and, if any, the slide rates.
-
-    Arguments and result as :func:`chrono_cyclograph_figure`.
-    """
-    return _kinematics_figure(traj, name, "velocities")
-
-
-def accelerations_figure(traj: Trajectory, name: str) -> Figure:
-    """Absolute angular accelerations of the links and, if any, the slide accelerations.
-
-    Arguments and result as :func:`chrono_cyclograph_figure`.
-    """
-    return _kinematics_figure(traj, name, "accelerations")
-
-
 _KINEMATICS = {
     "displacements": (
         ("theta", "q"),
@@ -290,11 +268,17 @@ _KINEMATICS = {
         ("absolute angular accelerations of the links", "prismatic joint accelerations"),
     ),
 }
-"""Columns, axis labels and panel titles of the three kinematic figures."""
+"""Columns, axis labels and panel titles of the three kinematic figures, in the order of
+:data:`FIGURE_NAMES`."""
 
 
-def _kinematics_figure(traj: Trajectory, name: str, kind: str) -> Figure:
-    """Angular quantity per link on top; the prismatic joints' coordinates of ``kind`` below."""
+def kinematics_figure(traj: Trajectory, name: str, kind: str) -> Figure:
+    """Angular quantity per link on top; the prismatic joints' coordinates of ``kind`` below.
+
+    ``kind`` is a key of :data:`_KINEMATICS`: absolute link angles and joint slides
+    (``"displacements"``), their rates (``"velocities"``) or accelerations
+    (``"accelerations"``). Other arguments and result as :func:`chrono_cyclograph_figure`.
+    """
     (angles, coords), ylabels, titles = _KINEMATICS[kind]
     model = traj.model
     joint = traj[coords]
