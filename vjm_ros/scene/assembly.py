@@ -34,8 +34,6 @@ def assemble(
     model: Model,
     fixed: list[int],
     tolerance: float = 1e-10,
-    max_iterations: int = 100,
-    max_evaluations: int = 300,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Solve the free coordinates so that ``C(q) = 0`` and ``A qd = 0``.
 
@@ -46,12 +44,9 @@ def assemble(
     fixed : list of int
         Coordinates that keep their given value and rate.
     tolerance : float
-        Largest acceptable ``|C|`` after assembly, m or rad.
-    max_iterations : int
-        Gauss-Newton steps at most.
-    max_evaluations : int
-        Residual evaluations at most, line-search trials included. Assemblies that succeed take a
-        few dozen; the budget bounds the time spent on geometry that cannot be closed, where
+        Largest acceptable ``|C|`` after assembly, m or rad. At most 100 Gauss-Newton steps
+        and 300 residual evaluations, line-search trials included: assemblies that succeed take
+        a few dozen; the budget bounds the time spent on geometry that cannot be closed, where
         each iteration would otherwise halve its step some twenty times for little progress.
 
     Returns
@@ -79,13 +74,13 @@ def assemble(
     if not np.isfinite(err):
         return q, qd, err
     evaluations = 1
-    for _ in range(max_iterations):
+    for _ in range(100):
         if err <= 0.01 * tolerance or free.size == 0:
             break
         a = terms.jacobian[:, free]
         step = np.linalg.lstsq(a, -terms.residual, rcond=1e-12)[0]
         scale = 1.0
-        while scale > 1e-6 and evaluations < max_evaluations:
+        while scale > 1e-6 and evaluations < 300:
             trial = q.copy()
             trial[free] += scale * step
             # Trials need only the residual; the Jacobian is formed for the accepted one.

@@ -61,8 +61,7 @@ def assembled_scene_yaml(scene: Scene) -> str:
 
 
 def with_initial_positions(
-    model: Model, positions: dict[str, float], tolerance: float = 1e-10,
-    name: str = "initial_positions",
+    model: Model, positions: dict[str, float], name: str = "initial_positions",
 ) -> Model:
     """The model started from given joint values, the other coordinates assembled.
 
@@ -71,9 +70,8 @@ def with_initial_positions(
     model : Model
     positions : dict
         Joint name to initial value (rad for revolute joints, m for prismatic ones); these
-        joints are held while the others are solved so that the closures hold.
-    tolerance : float
-        Largest closure residual accepted, m or rad.
+        joints are held while the others are solved so that the closures hold (to a
+        residual of 1e-10 m or rad).
     name : str
         How the positions are named in error messages (the parameter or flag).
 
@@ -104,6 +102,7 @@ def with_initial_positions(
     if not fixed:
         return model
     guess = model.with_state(q, np.zeros_like(qd))
+    tolerance = 1e-10
     with np.errstate(all="ignore"):
         q_new, qd_new, err = assemble(guess, fixed, tolerance)
     if not err <= tolerance or not np.all(np.isfinite(q_new)):
