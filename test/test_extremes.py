@@ -391,7 +391,7 @@ def test_one_hour_four_bar():
     same run is ``vjm bench --long-run 3600 --long-run-integrator implicit_euler``.
     """
     settings = SimulationSettings(integrator="implicit_euler", rate=1000.0, closure="penalty")
-    result = long_run("four_bar", 3600.0, settings)
+    result = long_run(3600.0, settings)
     print(json.dumps(result, indent=1))
     out = os.environ.get("VJM_BENCH_OUT")
     if out:

@@ -200,7 +200,7 @@ def _main_long_run(args) -> int:
         last[0] = t
 
     try:
-        result = long_run("four_bar", args.long_run, settings, progress=tick)
+        result = long_run(args.long_run, settings, progress=tick)
     finally:
         bar.close()
     args.out.mkdir(parents=True, exist_ok=True)

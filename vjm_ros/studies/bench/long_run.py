@@ -12,7 +12,6 @@ from vjm_ros.core.errors import (
     DivergenceError,
 )
 from vjm_ros.scene.loader import load_scene
-from vjm_ros.sim.settings import resolve_settings
 from vjm_ros.sim.simulator import SimulationSettings, Simulator
 from vjm_ros.studies.bench.grid import (
     jsonable,
@@ -21,21 +20,19 @@ from vjm_ros.studies.bench.runs import (
     _started,
 )
 
+SAMPLE_EVERY = 10
+"""Ticks between samples of energy and closure error."""
 
-def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
-             settings: SimulationSettings | None = None, sample_every: int = 10,
+
+def long_run(seconds: float, settings: SimulationSettings,
              progress: Callable[[float], None] | None = None) -> dict:
-    """Simulate one scene for a long time and report its energy drift and closure error.
+    """Simulate ``four_bar`` for a long time and report its energy drift and closure error.
 
     Parameters
     ----------
-    scene_name : str
     seconds : float
         Simulated seconds.
-    settings : SimulationSettings, optional
-        Default: the scene's defaults (``rk4`` at 1 kHz with its closure gains).
-    sample_every : int
-        Ticks between samples of energy and closure error.
+    settings : SimulationSettings
     progress : callable, optional
         Called with the simulated time now and then.
 
@@ -48,9 +45,7 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
         ``energy_final`` (T + V),
         ``finite`` and, on failure, ``error``.
     """
-    scene = load_scene(scene_name)
-    if settings is None:
-        settings = resolve_settings(scene.defaults, scene.gains)
+    scene = load_scene("four_bar")
     sim = _started(scene, Simulator(scene.model, settings, scene.gains, scene.plant))
     ticks = int(round(seconds * settings.rate))
     s0 = sim.sample()
@@ -64,24 +59,24 @@ def long_run(scene_name: str = "four_bar", seconds: float = 3600.0,
     try:
         for i in range(1, ticks + 1):
             sim.advance()
-            if i % sample_every == 0 or i == ticks:
+            if i % SAMPLE_EVERY == 0 or i == ticks:
                 last = sim.sample()
                 tv = float(last.energy[0] + last.energy[1])
                 max_t = max(max_t, float(last.energy[0]))
                 max_dev = max(max_dev, abs(tv - tv0))
                 max_gain = max(max_gain, tv - tv0)
                 max_err = max(max_err, last.max_closure_error)
-                if progress and i % (100 * sample_every) == 0:
+                if progress and i % (100 * SAMPLE_EVERY) == 0:
                     progress(sim.t)
     except DivergenceError as exc:
         error = str(exc)
     wall = time.perf_counter() - t0
     return {
-        "scene": scene_name,
+        "scene": scene.name,
         "settings": jsonable(asdict(settings)),
         "sim_time": sim.t,
         "wall_time": wall,
-        "sample_every_ticks": sample_every,
+        "sample_every_ticks": SAMPLE_EVERY,
         "max_closure_error": max_err,
         "final_closure_error": last.max_closure_error,
         "energy_drift": (max_dev / max_t) if max_t > 0 else 0.0,
