@@ -19,7 +19,6 @@ import json
 import logging
 import math
 import os
-import sys
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -28,6 +27,7 @@ from pathlib import Path
 from vjm_ros.core.errors import ConfigurationError
 from vjm_ros.logs.signals import StopSignals
 from vjm_ros.studies.bench.grid import FAILED
+from vjm_ros.studies.bench.progress import BenchProgress
 from vjm_ros.studies.sweep.plan import plan_sweep
 from vjm_ros.studies.sweep.run import MEASURES, case_duration, case_scene, case_settings
 from vjm_ros.studies.sweep.spec import Case, SweepSpec
@@ -177,30 +177,6 @@ def _warm_up() -> None:
     Simulator(scene.model, SimulationSettings(closure="exact"), scene.gains).advance()
 
 
-class SweepProgress:
-    """Rows done and failed, and the time left, on stderr (a line a second at most)."""
-
-    def __init__(self, total: int, enabled: bool) -> None:
-        self.total, self.enabled = total, enabled
-        self.start = time.monotonic()
-        self.last = 0.0
-        self.tty = sys.stderr.isatty()
-
-    def update(self, done: int, failed: int, final: bool = False) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        if not final and now - self.last < 1.0:
-            return
-        self.last = now
-        rate = done / max(now - self.start, 1e-9)
-        left = (self.total - done) / rate if rate > 0 else math.inf
-        eta = f"{int(left // 60)}:{int(left % 60):02d}" if math.isfinite(left) else "?"
-        line = f"sweep: {done}/{self.total} rows, {failed} failed, ETA {eta}"
-        end = "\n" if final or not self.tty else ""
-        print(("\r" if self.tty else "") + line, end=end, file=sys.stderr, flush=True)
-
-
 class Sweep:
     """A checked sweep and its table, ready to run; nothing is written before :meth:`run`.
 
@@ -262,7 +238,7 @@ class Sweep:
                           key=f"cases-{batch[0].key}-{len(batch)}-{os.getpid()}", pure=False)
             for batch in batches
         ]
-        bar = SweepProgress(len(self.todo), progress)
+        bar = BenchProgress(len(self.todo), enabled=progress)
         statuses = Counter(row["status"] for row in self.start.kept)
         written = {"n": 0, "failed": 0, "errors": 0}
         started = time.perf_counter()
@@ -304,14 +280,15 @@ class Sweep:
                         put(writer, row)
                         put_copies(writer, row)
                     f.flush()
-                    bar.update(written["n"], written["failed"])
+                    bar.advance(written["n"] - bar.done,
+                                f"{written['n']}/{len(self.todo)} rows, {written['failed']} failed")
             except KeyboardInterrupt:  # a signal handler other than ours (not the main thread)
                 interrupted = True
             if stop.requested:
                 interrupted = True
             if interrupted:
                 client.cancel(futures)
-            bar.update(written["n"], written["failed"], final=True)
+            bar.close()
         parquet = write_parquet(table, self.out / RESULTS_PARQUET)
         return {
             "rows": len(plan.cases), "run": written["n"], "skipped": len(self.start.kept),
