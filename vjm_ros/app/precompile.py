@@ -32,29 +32,24 @@ def precompile(log=print) -> float:
     tiers.compile_first()
     start = time.perf_counter()
     with compile_server.holding_lock(log):
-        _compile_all(log, start)
-    return time.perf_counter() - start
+        from vjm_ros.app.cli import main
+        from vjm_ros.scene.generated import star_scene
+        from vjm_ros.sim.samples import SampleBlock
+        from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
-
-def _compile_all(log, start: float) -> None:
-    from vjm_ros.app.cli import main
-    from vjm_ros.scene.generated import star_scene
-    from vjm_ros.sim.samples import SampleBlock
-    from vjm_ros.sim.simulator import SimulationSettings, Simulator
-
-    with tempfile.TemporaryDirectory() as scratch, contextlib.redirect_stdout(io.StringIO()):
-        main(["run", "four_bar", "--duration", "0.002", "--out", str(Path(scratch) / "run"),
-              "--mcap", str(Path(scratch) / "run.mcap")])
-    log(f"kernels, block pipeline, CSV and MCAP writers: {time.perf_counter() - start:.1f} s")
-    star = star_scene(6)  # the copies with the hub solves
-    sim = Simulator(star.model, SimulationSettings(closure="exact"), star.gains)
-    sim.blocks_compiled()
-    sim.advance_block(SampleBlock(star.model, 2), 2)
-    sim.sample()
-    log(f"... with the hub solves: {time.perf_counter() - start:.1f} s")
-    with contextlib.redirect_stdout(io.StringIO()):  # the controllers' compiled algebra
-        main(["model", "five_bar"])
-    log(f"... the controllers' model: {time.perf_counter() - start:.1f} s")
+        with tempfile.TemporaryDirectory() as scratch, contextlib.redirect_stdout(io.StringIO()):
+            main(["run", "four_bar", "--duration", "0.002", "--out", str(Path(scratch) / "run"),
+                  "--mcap", str(Path(scratch) / "run.mcap")])
+        log(f"kernels, block pipeline, CSV and MCAP writers: {time.perf_counter() - start:.1f} s")
+        star = star_scene(6)  # the copies with the hub solves
+        sim = Simulator(star.model, SimulationSettings(closure="exact"), star.gains)
+        sim.blocks_compiled()
+        sim.advance_block(SampleBlock(star.model, 2), 2)
+        sim.sample()
+        log(f"... with the hub solves: {time.perf_counter() - start:.1f} s")
+        with contextlib.redirect_stdout(io.StringIO()):  # the controllers' compiled algebra
+            main(["model", "five_bar"])
+        log(f"... the controllers' model: {time.perf_counter() - start:.1f} s")
 
 
 if __name__ == "__main__":
