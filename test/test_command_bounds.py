@@ -184,7 +184,7 @@ def test_the_buffer_counts_what_it_refused_for_its_size():
     assert not verdict.accepted and verdict.kind != OVERSIZE
     assert submit_effort_bytes(commands, serialize_message(wide_layout(1))).accepted
     assert (commands.oversize, commands.rejected, commands.accepted) == (2, 3, 1)
-    assert commands.latch().efforts.tolist() == [1.0, -2.0]
+    assert commands.efforts.tolist() == [1.0, -2.0]
 
 
 @pytest.mark.parametrize("dims", [0, 1, 3, 1000])

@@ -368,6 +368,12 @@ class CommandBuffer:
             self._active = False
             self._fresh = False
 
+    @property
+    def efforts(self) -> np.ndarray:
+        """The efforts the next latch would return if nothing changes, N m or N."""
+        with self._cv:
+            return self._efforts.copy()
+
 
 class Throttle:
     """At most one report per key and period; counts what it held back.
