@@ -6,7 +6,7 @@ The messages of one topic at every tick have fixed layouts whose bytes differ on
 ``/clock``, in that order) with the sequence numbers, times, stamps and values stored in by one
 compiled pass (:func:`vjm_ros.logs.stamping.stamp_records`), plus the ``markers`` record after
 the other messages of every ``marker_every``-th tick.
-The bytes equal those of the per-message encoders (test/test_log_blocks.py).
+The bytes are those rosbags' serializer writes (test/test_log_blocks.py).
 
 :class:`BlockWriter` is the ``mcap`` writer (1.6, pinned) taking such runs of records: its chunk
 builder copies them into one buffer kept for the whole file and keeps the message indexes as runs
@@ -37,7 +37,6 @@ RECORD_HEADER = struct.Struct("<BQHIQQ")
 """Opcode, record length, channel id, sequence, log time, publish time of a Message record."""
 _SEQUENCE, _LOG_TIME, _PUBLISH_TIME = 11, 15, 23
 """Byte offsets of the sequence and the two times in a Message record."""
-NS_PER_S = 1_000_000_000
 
 
 class BulkIndex:
