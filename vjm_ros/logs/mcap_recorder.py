@@ -151,7 +151,6 @@ class McapRecorder(Recorder):
         self.flushed_count = 0
         self.samples = 0
         self._closed = False
-        self._joint_names = list(model.joint_names)
         self._force_names = list(model.force_names)  # closures, then stops
         self.measured = bool(settings.get("sensors"))
         """A scene with sensors: ``/joint_states`` holds the measured state (as the node
