@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
-from waiting import wait_for
+from waiting import nanoseconds, wait_for
 
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 
@@ -32,11 +32,6 @@ DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 ROOT = Path(__file__).resolve().parents[1]
 NODE = "/vjm_sim_node"
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def nanoseconds(msg_stamp) -> int:
-    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
-    return msg_stamp.sec * 1_000_000_000 + msg_stamp.nanosec
 
 
 class Probe:

@@ -25,10 +25,9 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
-from waiting import wait_for
+from waiting import nanoseconds, wait_for
 
 from vjm_ros.ros.clock_owner import rivals  # noqa: E402
-from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 
 DOMAIN = int(os.environ["ROS_DOMAIN_ID"])

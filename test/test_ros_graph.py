@@ -26,10 +26,10 @@ import waiting
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
-from reset_run import nanoseconds  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
+from waiting import nanoseconds
 
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 from vjm_ros.ros.scene_client import wait_for_scene_description  # noqa: E402

@@ -40,9 +40,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
-from waiting import wait_for
+from waiting import nanoseconds, wait_for
 
-from vjm_ros.ros.conversions import nanoseconds  # noqa: E402
 from vjm_ros.ros.node import SimNode, run  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 from vjm_ros.scene.loader import load_scene  # noqa: E402

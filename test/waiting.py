@@ -1,4 +1,4 @@
-"""Waiting in tests for what another thread or process does."""
+"""Waiting in tests for what another thread or process does, and the times it stamps."""
 
 from __future__ import annotations
 
@@ -13,3 +13,8 @@ def wait_for(predicate, timeout=10.0, what="condition", poll=0.005):
             return
         time.sleep(poll)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+def nanoseconds(msg_stamp) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
+    return msg_stamp.sec * 1_000_000_000 + msg_stamp.nanosec
