@@ -299,12 +299,11 @@ def render_section(r: dict) -> str:
         f"(MCAP) and {ratio['+rrd'] - 1:.2f} (rerun) physics-only runs.",
         "- The CSV holds every value as Python's `repr` writes it (the shortest text that reads "
         "back to the same double), formatted by compiled code (Ryu's shortest digits); the file "
-        "is byte-identical to the one written row by row. MCAP records are written a block of "
-        "ticks at a time, each topic's byte image copied and its numbers stored in by one "
-        "compiled pass, in buffers kept for the whole file, and compressed per chunk (zstd "
-        "level -3), every record the bytes rosbags' serializer writes; rerun receives arrow "
-        "columns built from whole arrays, one chunk per entity in one `send_chunks` every "
-        "5000 ticks.",
+        "is byte-identical to the one written row by row. MCAP records are built a block of "
+        "ticks at a time from byte images of each topic, in buffers kept for the whole file, "
+        "and compressed per chunk (zstd level -3), every record the bytes rosbags' serializer "
+        "writes; rerun receives arrow columns built from whole arrays, one chunk per entity in "
+        "one `send_chunks` every 5000 ticks.",
         "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
         "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
         "blocks in a thread of their own (opening their files there while the compiled "

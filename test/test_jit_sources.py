@@ -15,7 +15,7 @@ import types
 from vjm_ros.jit import sources
 
 COMPILED_MODULES = ["vjm_ros.core.kernels", "vjm_ros.core.pipeline", "vjm_ros.sim.float_text",
-                    "vjm_ros.control.compiled", "vjm_ros.logs.stamping"]
+                    "vjm_ros.control.compiled"]
 """The modules whose functions numba compiles (with what they import)."""
 
 FOLLOWED = ("vjm_ros.core.", "vjm_ros.jit.")

@@ -5,7 +5,7 @@ no later run starts on the plain-Python tier (:mod:`vjm_ros.jit.tiers`): the ker
 block pipeline and the observation of one state (:func:`vjm_ros.core.kernels.step`,
 :func:`vjm_ros.core.pipeline.advance_ticks`, :func:`~vjm_ros.core.pipeline.observe_state`)
 and their copies with the hub solves (mechanisms with four chains or more on one pin), the CSV
-writer, the MCAP records' writer, and the controllers' compiled model. Compiled in this process (``VJM_TIERED=0``), one
+writer, and the controllers' compiled model. Compiled in this process (``VJM_TIERED=0``), one
 after the other: 1-2 minutes on a 2-core machine, seconds when the cache holds them already.
 
 Run it after ``pip install`` or ``colcon build`` (numba's cache is empty then), and after an edit
@@ -38,9 +38,8 @@ def precompile(log=print) -> float:
         from vjm_ros.sim.simulator import SimulationSettings, Simulator
 
         with tempfile.TemporaryDirectory() as scratch, contextlib.redirect_stdout(io.StringIO()):
-            main(["run", "four_bar", "--duration", "0.002", "--out", str(Path(scratch) / "run"),
-                  "--mcap", str(Path(scratch) / "run.mcap")])
-        log(f"kernels, block pipeline, CSV and MCAP writers: {time.perf_counter() - start:.1f} s")
+            main(["run", "four_bar", "--duration", "0.002", "--out", str(Path(scratch) / "run")])
+        log(f"kernels, block pipeline, CSV writer: {time.perf_counter() - start:.1f} s")
         star = star_scene(6)  # the copies with the hub solves
         sim = Simulator(star.model, SimulationSettings(closure="exact"), star.gains)
         sim.blocks_compiled()

@@ -24,11 +24,10 @@ COMPILED_SOURCES = tuple(sorted(
     [*(PACKAGE / "core").rglob("*.py"),
      *(p for p in (PACKAGE / "jit").glob("*.py") if p.name not in UNCOMPILED),
      PACKAGE / "control" / "compiled.py",
-     PACKAGE / "sim" / "float_text.py",
-     PACKAGE / "logs" / "stamping.py"]))
+     PACKAGE / "sim" / "float_text.py"]))
 """Files whose contents key every compiled function's cache: all of ``core/`` (the kernels and
 what they are built from), ``jit/`` but :data:`UNCOMPILED` (numba's options), the controllers'
-compiled algebra, the CSV's number formatting and the MCAP records' writer."""
+compiled algebra and the CSV's number formatting."""
 
 
 @functools.lru_cache(maxsize=1)

@@ -1,18 +1,17 @@
 """The per-tick messages of a whole block of ticks as MCAP records, built and indexed in bulk.
 
 The messages of one topic at every tick have fixed layouts whose bytes differ only in numbers
-(:class:`vjm_ros.logs.cdr.FixedLayout`): a block's records are written as one byte image per tick
-(``/joint_states``, ``constraint_forces``, each ``closures/<name>/wrench``, ``energy``,
-``/clock``, in that order) with the sequence numbers, times, stamps and values stored in by one
-compiled pass (:func:`vjm_ros.logs.stamping.stamp_records`), plus the ``markers`` record after
-the other messages of every ``marker_every``-th tick.
+(:class:`vjm_ros.logs.cdr.FixedLayout`): a block's records are written as rows of one byte image
+per tick (``/joint_states``, ``constraint_forces``, each ``closures/<name>/wrench``, ``energy``,
+``/clock``, in that order) with the sequence numbers, times, stamps and values written column by
+column, plus the ``markers`` record after the other messages of every ``marker_every``-th tick.
 The bytes are those rosbags' serializer writes (test/test_log_blocks.py).
 
 :class:`BlockWriter` is the ``mcap`` writer (1.6, pinned) taking such runs of records: its chunk
 builder copies them into one buffer kept for the whole file and keeps the message indexes as runs
 of arrays; each chunk is written with its indexes in one call to the file. Statistics and indexes
 are those the writer keeps for messages added one by one. The encoder, too, writes every block
-into a buffer it keeps, in place: a long run allocates no memory per block (fresh pages cost the
+into buffers it keeps, in place: a long run allocates no memory per block (fresh pages cost the
 operating system a fault and a clearing each).
 """
 
@@ -21,7 +20,6 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Sequence
-from typing import NamedTuple
 
 import numpy as np
 import zstandard
@@ -30,13 +28,13 @@ from mcap.opcode import Opcode
 from mcap.records import ChunkIndex, Message
 from mcap.writer import CompressionType, IndexType, Writer
 
-from vjm_ros.jit import tiers
-from vjm_ros.logs import cdr, messages, stamping
+from vjm_ros.logs import cdr, messages
 
 RECORD_HEADER = struct.Struct("<BQHIQQ")
 """Opcode, record length, channel id, sequence, log time, publish time of a Message record."""
 _SEQUENCE, _LOG_TIME, _PUBLISH_TIME = 11, 15, 23
 """Byte offsets of the sequence and the two times in a Message record."""
+NS_PER_S = 1_000_000_000
 
 
 class BulkIndex:
@@ -272,61 +270,36 @@ class BlockWriter(Writer):
 
 
 # ---------------------------------------------------------------- records of a block
+def _put(rows: np.ndarray, at: int, dtype: str, values) -> None:
+    """Write ``values`` (one per row) as ``dtype`` at byte ``at`` of every row."""
+    rows[:, at : at + np.dtype(dtype).itemsize].view(dtype)[:, 0] = values
+
+
 class _Kind:
-    """Records of one topic for many ticks: one byte image and where its numbers go (offsets
-    in the record, for :func:`vjm_ros.logs.stamping.stamp_records`)."""
+    """Records of one topic for many ticks: one byte image and where its numbers go."""
 
     def __init__(self, channel: int, layout: cdr.FixedLayout):
         self.channel = channel
+        self.layout = layout
         head = RECORD_HEADER.pack(Opcode.MESSAGE, RECORD_HEADER.size - 9 + len(layout.template),
                                   channel, 0, 0, 0)
         self.image = np.frombuffer(head + layout.template, dtype=np.uint8)
-        body = RECORD_HEADER.size
-        self.seq_at = [_SEQUENCE]
-        self.ns_at = [_LOG_TIME, _PUBLISH_TIME]
-        self.stamp_at = [body + at for at in layout.stamps]
-        self.bits_at = [body + offset + 8 * i for offset, count in layout.arrays
-                        for i in range(count)]
 
+    def fill(self, rows: np.ndarray, at: int, seq, ns, sec, nsec, values: Sequence) -> None:
+        """Write the numbers of one record per row at byte ``at`` of ``rows`` (T, ...).
 
-class _Layout(NamedTuple):
-    """Records of several kinds laid out one after the other, as one record: the arguments of
-    :func:`~vjm_ros.logs.stamping.stamp_records` that do not change from block to block."""
-
-    image: np.ndarray
-    seq_at: np.ndarray
-    ns_at: np.ndarray
-    stamp_at: np.ndarray
-    bits_at: np.ndarray
-
-    @classmethod
-    def of(cls, kinds: Sequence[_Kind]) -> _Layout:
-        starts = np.cumsum([0] + [len(kind.image) for kind in kinds])[:-1]
-
-        def offsets(name: str) -> np.ndarray:
-            return np.array([at + o for at, kind in zip(starts.tolist(), kinds, strict=True)
-                             for o in getattr(kind, name)], dtype=np.int64)
-
-        return cls(np.concatenate([kind.image for kind in kinds]), offsets("seq_at"),
-                   offsets("ns_at"), offsets("stamp_at"), offsets("bits_at"))
-
-    def stamp(self, out: np.ndarray, starts: np.ndarray, seq: np.ndarray, ns: np.ndarray,
-              values: np.ndarray) -> None:
-        """Write records at byte ``starts`` of ``out`` with sequence numbers ``seq``, times
-        ``ns`` (ns) and values ``values`` (rows, len(bits_at))."""
-        STAMP(out, starts, self.image, seq, ns, self.seq_at, self.ns_at, self.stamp_at,
-              np.ascontiguousarray(values, dtype=np.float64).view(np.uint64), self.bits_at)
-
-    def prepare(self) -> None:
-        """Load the compiled writer (or have it compiled in the background) now."""
-        empty = np.zeros(0, dtype=np.uint64)
-        STAMP.prepare(self.image, np.zeros(0, dtype=np.int64), self.image, empty, empty,
-                      self.seq_at, self.ns_at, self.stamp_at, np.zeros((0, 0), np.uint64),
-                      self.bits_at)
-
-
-STAMP = tiers.entry(stamping, "stamp_records")
-"""The compiled record writer (plain Python while numba compiles it, :mod:`vjm_ros.jit.tiers`)."""
+        ``values`` holds one array (T, count) per float64 run of the layout.
+        """
+        _put(rows, at + _SEQUENCE, "<u4", seq)
+        _put(rows, at + _LOG_TIME, "<u8", ns)
+        _put(rows, at + _PUBLISH_TIME, "<u8", ns)
+        body = at + RECORD_HEADER.size
+        for stamp in self.layout.stamps:
+            _put(rows, body + stamp, "<i4", sec)
+            _put(rows, body + stamp + 4, "<u4", nsec)
+        for (offset, count), v in zip(self.layout.arrays, values, strict=True):
+            start = body + offset
+            rows[:, start : start + 8 * count].view("<f8")[:] = v
 
 
 def _xyz(points: np.ndarray) -> np.ndarray:
@@ -378,49 +351,50 @@ class BlockEncoder:
                 len(messages.ENERGY_LABELS))),
             _Kind(channels[topics.clock], cdr.CLOCK_LAYOUT),
         ]
-        self.ticks = _Layout.of(self.kinds)
-        """A tick's records, one after the other."""
-        starts = np.cumsum([0] + [len(kd.image) for kd in self.kinds])
-        self.columns = [(kd.channel, int(at)) for kd, at in zip(self.kinds, starts,
+        self.starts = np.cumsum([0] + [len(kd.image) for kd in self.kinds])
+        self.image = np.concatenate([kd.image for kd in self.kinds])
+        self.columns = [(kd.channel, int(at)) for kd, at in zip(self.kinds, self.starts,
                                                                 strict=False)]
         """Channel id and byte offset in a tick's records of each per-tick message."""
         self.marker_channel = channels.get(topics.markers)
-        self.markers: _Layout | None = None  # from the first block's geometry
+        self.markers: _Kind | None = None  # from the first block's geometry
+        self._table = np.empty(0, dtype=np.uint8)
         self._out = np.empty(0, dtype=np.uint8)
 
     def block_bytes(self, rows: int) -> int:
         """Bytes of the records of a block of ``rows`` ticks, markers included (an upper bound
         before the first markers are laid out: each as large as a tick's other records)."""
-        layout = self.markers if self.markers is not None else self.ticks
+        marker = len(self.markers.image) if self.markers is not None else len(self.image)
         marked = -(-rows // self.marker_every) + 1 if self.marker_every > 0 else 0
-        return rows * len(self.ticks.image) + marked * len(layout.image)
+        return rows * len(self.image) + marked * marker
 
     def reserve(self, rows: int) -> None:
-        """Buffers for blocks of ``rows`` ticks, their pages touched now, and the compiled
-        record writer loaded."""
+        """Buffers for blocks of ``rows`` ticks, their pages touched now."""
+        size = rows * len(self.image)
+        if len(self._table) < size:
+            self._table = np.zeros(size, dtype=np.uint8)
+            self._table.fill(0)  # np.zeros maps its pages only when first written
         total = self.block_bytes(rows)
         if len(self._out) < total:
             self._out = np.zeros(total, dtype=np.uint8)
-            self._out.fill(0)  # np.zeros maps its pages only when first written
-        self.ticks.prepare()
+            self._out.fill(0)
 
-    def _values(self, block, rows: int) -> np.ndarray:
-        """The float64 values of each tick's records, in record order (rows, values)."""
+    def _values(self, block, rows: int) -> list[list[np.ndarray]]:
+        """The float64 runs of each per-tick record, in the order of :attr:`kinds`."""
         force = block.force[:rows]
         effort = (block.effort[:rows] if block.effort.ndim == 2  # one row per tick
                   else np.broadcast_to(block.effort, block.q[:rows].shape))
-        values = [block.q[:rows], block.qd[:rows], effort]
+        values = [[block.q[:rows], block.qd[:rows], effort]]
         if self.measured:
             m = block.measured[:rows]
-            values = [m[:, 0], m[:, 1], m[:, 2]] + values
-        values.append(force.reshape(rows, -1))
-        values += [force[:, j, c] for j in range(force.shape[1]) for c in (slice(0, 2),
-                                                                           slice(2, 3))]
-        return np.concatenate(values + [block.energy[:rows]], axis=1)
+            values.insert(0, [m[:, 0], m[:, 1], m[:, 2]])
+        values.append([force.reshape(rows, -1)] if force.shape[1] else [])
+        values += [[force[:, j, :2], force[:, j, 2:]] for j in range(force.shape[1])]
+        return values + [[block.energy[:rows]], []]
 
-    def _marker_values(self, block, ticks: np.ndarray) -> np.ndarray:
+    def _marker_values(self, block, ticks: np.ndarray) -> list[np.ndarray]:
         """Points of the markers (links, joints, one arrow per closure) at ``ticks``, as
-        :func:`vjm_ros.logs.messages.marker_specs` draws them (ticks, values)."""
+        :func:`vjm_ros.logs.messages.marker_specs` draws them."""
         seg = block.segments[ticks]
         g = len(ticks)
         joints = np.concatenate((seg[:, :, 0, :], block.points[ticks].reshape(g, -1, 2)), axis=1)
@@ -429,34 +403,51 @@ class BlockEncoder:
         for j in range(cp.shape[1]):
             arrow = np.stack((cp[:, j], cp[:, j] + self.force_scale * f[:, j, :2]), axis=1)
             out.append(_xyz(arrow))
-        return np.concatenate(out, axis=1)
+        return out
 
     def encode(self, block, ns: np.ndarray, first: int) -> EncodedBlock:
         """Records of the block's rows (``len(ns)``) logged at ``ns`` (ns), the first being
         sample number ``first`` of the recording (valid until the next call: the records are
-        written into a buffer the encoder keeps).
-
-        Each tick's records follow the last tick's, with the markers record after the others
-        on every ``marker_every``-th sample.
-        """
+        written into buffers the encoder keeps)."""
         rows = len(ns)
-        seq = ((first + np.arange(rows)) & 0xFFFFFFFF).astype(np.uint64)
-        times = ns.astype(np.uint64)
+        seq = (first + np.arange(rows)) & 0xFFFFFFFF
+        sec, nsec = np.divmod(ns, NS_PER_S)
+        size = len(self.image)
+        self._table = _at_least(self._table, rows * size)
+        table = self._table[: rows * size].reshape(rows, size)
+        table[:] = self.image
+        for kind, start, values in zip(self.kinds, self.starts, self._values(block, rows),
+                                       strict=False):
+            kind.fill(table, int(start), seq, ns, sec, nsec, values)
         ticks = np.arange(rows)
         marked = (np.nonzero((first + ticks) % self.marker_every == 0)[0]
                   if self.marker_every > 0 else ticks[:0])
-        if len(marked) and self.markers is None:
-            sample = block.sample(int(marked[0]))
-            self.lay_out_markers(messages.markers(sample, 0, self.force_scale))
-        size = len(self.ticks.image)
-        msize = len(self.markers.image) if len(marked) else 0
-        tick_starts = ticks * size + np.searchsorted(marked, ticks) * msize
-        tick_starts = np.append(tick_starts, rows * size + len(marked) * msize)
+        tick_starts = np.empty(rows + 1, dtype=np.int64)
+        if len(marked) == 0:
+            tick_starts[:-1] = ticks * size
+            tick_starts[-1] = rows * size
+            return EncodedBlock(table.reshape(-1), ns, tick_starts, self.columns,
+                                self.marker_channel, marked, size)
+        mrows = self._marker_rows(block, marked, seq, ns, sec, nsec)
+        msize = mrows.shape[1]
+        tick_starts[:-1] = ticks * size + np.searchsorted(marked, ticks) * msize
+        tick_starts[-1] = rows * size + len(marked) * msize
         out = self._out = _at_least(self._out, int(tick_starts[-1]))
-        self.ticks.stamp(out, tick_starts[:-1], seq, times, self._values(block, rows))
-        if len(marked):
-            self.markers.stamp(out, tick_starts[marked] + size, seq[marked], times[marked],
-                               self._marker_values(block, marked))
+        # [ticks up to the first marked one][markers] [every ticks][markers] ... [the rest]
+        prefix, every = int(marked[0]) + 1, self.marker_every
+        groups = len(marked) - 1
+        out[: prefix * size] = table[:prefix].reshape(-1)
+        at = prefix * size
+        out[at : at + msize] = mrows[0]
+        at += msize
+        period = every * size + msize
+        region = out[at : at + groups * period].reshape(groups, period)
+        region[:, : every * size] = table[prefix : prefix + groups * every].reshape(
+            groups, every * size)
+        region[:, every * size :] = mrows[1:]
+        at += groups * period
+        rest = prefix + groups * every
+        out[at : at + (rows - rest) * size] = table[rest:].reshape(-1)
         return EncodedBlock(out[: int(tick_starts[-1])], ns, tick_starts, self.columns,
                             self.marker_channel, marked, size)
 
@@ -464,7 +455,19 @@ class BlockEncoder:
         """Take the markers' byte layout from one markers message of the model (the first
         one: every tick's has the same layout)."""
         if self.markers is None and self.marker_channel is not None:
-            self.markers = _Layout.of([_Kind(self.marker_channel, cdr.markers_layout(markers))])
+            self.markers = _Kind(self.marker_channel, cdr.markers_layout(markers))
+
+    def _marker_rows(self, block, marked, seq, ns, sec, nsec) -> np.ndarray:
+        """Records of the markers at ticks ``marked`` (G, record size)."""
+        if self.markers is None:
+            sample = block.sample(int(marked[0]))
+            self.lay_out_markers(messages.markers(sample, 0, self.force_scale))
+        kind = self.markers
+        mrows = np.empty((len(marked), len(kind.image)), dtype=np.uint8)
+        mrows[:] = kind.image
+        values = self._marker_values(block, marked)
+        kind.fill(mrows, 0, seq[marked], ns[marked], sec[marked], nsec[marked], values)
+        return mrows
 
 
 def _at_least(buffer: np.ndarray, size: int) -> np.ndarray:
