@@ -451,17 +451,12 @@ class BlockEncoder:
         return EncodedBlock(out[: int(tick_starts[-1])], ns, tick_starts, self.columns,
                             self.marker_channel, marked, size)
 
-    def lay_out_markers(self, markers) -> None:
-        """Take the markers' byte layout from one markers message of the model (the first
-        one: every tick's has the same layout)."""
-        if self.markers is None and self.marker_channel is not None:
-            self.markers = _Kind(self.marker_channel, cdr.markers_layout(markers))
-
     def _marker_rows(self, block, marked, seq, ns, sec, nsec) -> np.ndarray:
         """Records of the markers at ticks ``marked`` (G, record size)."""
-        if self.markers is None:
+        if self.markers is None:  # every tick's markers have the first one's layout
             sample = block.sample(int(marked[0]))
-            self.lay_out_markers(messages.markers(sample, 0, self.force_scale))
+            layout = cdr.markers_layout(messages.markers(sample, 0, self.force_scale))
+            self.markers = _Kind(self.marker_channel, layout)
         kind = self.markers
         mrows = np.empty((len(marked), len(kind.image)), dtype=np.uint8)
         mrows[:] = kind.image
