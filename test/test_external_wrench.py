@@ -117,3 +117,56 @@ def test_node_refuses_a_wrench_at_an_unknown_point(harness, frame):  # noqa: F81
     pub.publish(msg)
     wait_for(lambda: h.node.loop.wrenches.refused == 1, what="the refusal")
     assert h.node.loop.wrenches.accepted == 0
+
+
+def test_node_drops_a_wrench_after_command_timeout(harness):  # noqa: F811
+    """A realtime node at 200 Hz with ``command_timeout`` 0.3 s gets one wrench: it pushes for a
+    span of ticks, then the node drops it and never applies it again.
+
+    Oracle: each published tick replayed from the state published one tick before, once with the
+    wrench and once without, by a simulator of the node's scene and settings; the node's tick
+    matches exactly one of the two. The replay and the node compute the same tick in the same
+    compiled code, so a match is within round-off (1e-9 rad, as the lockstep tests hold it); the
+    20 N push moves the tip by some 2.5e-4 m in one 5 ms tick, so the other replay misses by far
+    more than that."""
+    from vjm_ros.sim.simulator import Simulator
+
+    h = harness(rate_hz=200.0, realtime=True, command_timeout=0.3, duration=1.5)
+    pub = h.probe.create_publisher(WrenchStamped, f"{NODE}/external_wrench", 10)
+    wait_for(lambda: pub.get_subscription_count() > 0, what="the wrench subscription")
+    msg = WrenchStamped()
+    msg.header.frame_id = "chain1_tip"
+    msg.wrench.force.y = -20.0
+    h.start()
+    wait_for(lambda: len(h.messages("/joint_states")) > 20, 10.0, "joint states")
+    pub.publish(msg)
+    assert h.join() == 0
+    assert h.node.loop.wrenches.accepted == 1
+    js = h.messages("/joint_states")
+    assert len(js) == 301  # 1.5 s at 200 Hz and the first state
+    node_sim = h.node.loop.sim
+    tip = next(p.ref for p in node_sim.model.points if p.name == "chain1_tip")
+    push = (Load("external_wrench.chain1_tip", tip, (0.0, -20.0), 0.0),)
+    replay = Simulator(node_sim.model, node_sim.settings, node_sim.scene_gains, node_sim.plant)
+    pushed = []
+    for before, after in zip(js, js[1:], strict=False):
+        errors = []
+        for loads in ((), push):
+            replay.q = np.array(before.position)
+            replay.qd = np.array(before.velocity)
+            replay.tau = np.array(after.effort)  # the joints' applied efforts, N m
+            replay.set_external_loads(loads)
+            replay.advance()
+            errors.append(max(np.max(np.abs(replay.q - after.position)),
+                              np.max(np.abs(replay.qd - after.velocity))))
+        assert min(errors) <= 1e-9 < 1e-6 <= max(errors), errors
+        pushed.append(errors[1] < errors[0])
+    ticks = np.flatnonzero(pushed)
+    assert ticks.size, "the wrench never acted"
+    # one span, then never again: the drop reached the simulator
+    assert np.array_equal(ticks, np.arange(ticks[0], ticks[-1] + 1))
+    assert ticks[-1] + 1 < len(pushed)
+    # held for about command_timeout of wall time: paced ticks never run ahead of the wall clock,
+    # so the span stays near or below 0.3 s of simulated time (0.6 s allows a catch-up after a
+    # stall, as the command timeout test allows)
+    assert 0.0 < (ticks[-1] + 1 - ticks[0]) * 0.005 <= 0.6
