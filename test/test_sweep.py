@@ -330,3 +330,31 @@ def test_tune_writes_the_best_gains_as_a_loadable_snippet(tmp_path):
     assert parse_scene(yaml.safe_dump(base), "tuned").gains["omega_n"] == snippet["omega_n"]
     assert (out / "tuning.png").stat().st_size > 10_000
     assert os.path.exists(summary["figure"])
+
+
+def test_tune_runs_on_an_existing_scheduler(engine, tmp_path, capsys):
+    """``vjm tune --cluster``: the runs go to the scheduler named (the module's cluster, whose
+    workers count the tasks they execute), and the choice is the one the rows make."""
+    from vjm_ros.studies.sweep import cli as sweep_cli
+
+    def executed(dask_worker):
+        return dask_worker.state.executed_count
+
+    before = sum(engine.client.run(executed).values())
+    out = tmp_path / "tune"
+    code = sweep_cli.main("tune", ["four_bar", "--integrator", "rk4", "--rate", "1000",
+                                   "--duration", "0.1", "--no-progress", "--out", str(out),
+                                   "--cluster", engine.client.scheduler.address])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    rows = rows_of(out)
+    ran = [r for r in rows if r["status"] == "ok"]
+    assert ran and sum(engine.client.run(executed).values()) - before >= len(ran)
+    summary = json.loads(stdout.strip().splitlines()[-1])
+    edges = {float(z): e for z, e in summary["stability_edge"].items()}
+    within = [r for r in ran if edges[float(r["zeta"])] is None
+              or float(r["omega_n"]) <= edges[float(r["zeta"])] / summary["margin"]]
+    assert summary["chosen"]["max_closure_error"] == min(
+        float(r["max_closure_error"]) for r in within)
+    snippet = yaml.safe_load((out / "gains.yaml").read_text())["closure_method"]
+    assert snippet["omega_n"] == summary["chosen"]["omega_n"]

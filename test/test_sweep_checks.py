@@ -341,3 +341,23 @@ def test_tune_refuses_bad_flags_before_any_cluster(tmp_path, capsys, flags, mess
     err = capsys.readouterr().err
     assert code == 2 and not out.exists(), err
     assert f"vjm tune: error: vjm tune four_bar: {message}" in err
+
+
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+def test_a_malformed_address_on_the_command_line_exits_2_naming_it(command, tmp_path, capsys):
+    """What ``Engine`` refuses (test_a_malformed_address_is_refused_with_a_message) reaches the
+    user of either command as one line and exit code 2, with no table started."""
+    out = tmp_path / "out"
+    if command == "sweep":
+        spec = tmp_path / "s.yaml"
+        spec.write_text(BASE)
+        target = [str(spec)]
+    else:
+        target = ["four_bar", "--duration", "0.1"]
+    code = sweep_cli.main(command, [*target, "--out", str(out), "--cluster", "scheduler",
+                                    "--cluster-timeout", "0.5", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert ("--cluster scheduler: expected a scheduler address such as tcp://host:8786, found "
+            "a malformed address (missing port number") in err
+    assert "Traceback" not in err and not out.exists()
