@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 import yaml
@@ -118,6 +119,22 @@ def test_every_case_is_a_row_and_the_same_spec_gives_the_same_numbers(engine, tm
                 assert row[m] == other[m], (row["key"], m)
     table = pq.read_table(tmp_path / "a" / RESULTS_PARQUET)
     assert table.num_rows == 8 and set(spec.columns + list(MEASURES)) == set(table.column_names)
+    # the Parquet holds the CSV's values, each column of one type: numbers a reader can compute
+    # with (the measures float64, empty cells null), text as text
+    for name in table.column_names:
+        kind = table.schema.field(name).type
+        for row, value in zip(a, table.column(name).to_pylist(), strict=True):
+            text = row[name]
+            if text == "":
+                assert value is None, (name, row["key"])
+            elif kind == pa.string():
+                assert value == text, (name, row["key"])
+            elif kind == pa.bool_():
+                assert value is (text == "True"), (name, row["key"])
+            else:
+                assert value == float(text), (name, row["key"])
+    assert {table.schema.field(m).type for m in MEASURES if m not in ("status", "message")} <= {
+        pa.float64(), pa.int64(), pa.bool_()}
 
 
 def test_resume_runs_only_the_missing_rows(engine, tmp_path):
