@@ -135,6 +135,8 @@ def test_vjm_import_exits_2_naming_the_element_and_writes_yaml_otherwise(tmp_pat
     ("1.6", "<xyz>0 1 0</xyz><use_parent_model_frame>true</use_parent_model_frame>", [0, 1, 0]),
     ("1.7", "<xyz>0 1 0</xyz>", [0, -1, 0]),
     ("1.7", '<xyz expressed_in="__model__">0 1 0</xyz>', [0, 1, 0]),
+    ("1.8", "<xyz>0 1 0</xyz>", [0, -1, 0]),  # 1.8 and 1.10 keep 1.7's rule
+    ("1.10", '<xyz expressed_in="frame_b">0 1 0</xyz>', [0, 0, 1]),
     ("1.11", '<xyz expressed_in="frame_b">0 1 0</xyz>', [0, 0, 1]),
 ])
 def test_joint_axes_are_read_in_the_frame_of_the_files_version(tmp_path, version, axis_xml,
@@ -144,7 +146,7 @@ def test_joint_axes_are_read_in_the_frame_of_the_files_version(tmp_path, version
     from vjm_ros.formats.sdformat import read_sdformat
 
     frame = ('<frame name="frame_b"><pose>0 0 0 1.5707963267948966 0 0</pose></frame>'
-             if version in ("1.7", "1.11") else "")
+             if version not in ("1.4", "1.5", "1.6") else "")
     path = tmp_path / "axis.sdf"
     path.write_text(f'<sdf version="{version}"><model name="m">'
                     '<link name="a"><pose>0 0 0 3.141592653589793 0 0</pose></link>'
