@@ -11,6 +11,7 @@ import os
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
 
+import io  # noqa: E402
 import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -23,8 +24,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import rclpy  # noqa: E402
 import waiting
+import yourdfpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray, String  # noqa: E402
@@ -41,6 +43,9 @@ pytestmark = pytest.mark.ros
 DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
 ROOT = Path(__file__).resolve().parents[1]
 DEEP = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""What robot_state_publisher offers and its clients ask for."""
 
 
 def start_node(*params, namespace=None):
@@ -78,14 +83,14 @@ class Probe:
         self.lock = threading.Lock()
         self.executor = None
 
-    def listen(self, topic, kind):
+    def listen(self, topic, kind, qos=None):
         self.got[topic] = []
 
         def store(msg):
             with self.lock:
                 self.got[topic].append(msg)
 
-        self.node.create_subscription(kind, topic, store, DEEP)
+        self.node.create_subscription(kind, topic, store, qos or DEEP)
 
     def spin(self):
         self.executor = SingleThreadedExecutor(context=self.ctx)
@@ -110,7 +115,8 @@ def wait_for(predicate, timeout=60.0, what="condition"):
 
 
 def test_two_simulators_side_by_side_under_namespaces():
-    """/a runs five_bar, /b four_bar; each controller topic reaches only its own node."""
+    """/a runs five_bar, /b four_bar; each controller topic reaches only its own node, and each
+    node's URDF is on its own namespace's ``robot_description``, naming its joint states."""
     a = start_node("scene:=five_bar", "wait_for_command:=true", "command_timeout:=0.0",
                    "realtime:=false", "duration:=0.2", namespace="/a")
     b = start_node("scene:=four_bar", "wait_for_command:=true", "command_timeout:=0.0",
@@ -119,6 +125,8 @@ def test_two_simulators_side_by_side_under_namespaces():
     try:
         for topic in ("/a/joint_states", "/b/joint_states", "/joint_states"):
             probe.listen(topic, JointState)
+        for topic in ("/a/robot_description", "/b/robot_description", "/robot_description"):
+            probe.listen(topic, String, LATCHED)  # published before the probe joins
         pub_a = probe.node.create_publisher(Float64MultiArray, "/a/vjm_sim_node/effort_commands", 10)
         probe.spin()
         wait_for(lambda: probe.messages("/a/joint_states") and probe.messages("/b/joint_states"),
@@ -126,6 +134,14 @@ def test_two_simulators_side_by_side_under_namespaces():
         assert list(probe.messages("/a/joint_states")[0].name)[0] == "left_base"
         assert list(probe.messages("/b/joint_states")[0].name) == [
             "crank_joint", "coupler_joint", "rocker_joint"]
+        wait_for(lambda: probe.messages("/a/robot_description")
+                 and probe.messages("/b/robot_description"), what="both descriptions")
+        for ns in ("/a", "/b"):
+            text = probe.messages(f"{ns}/robot_description")[0].data
+            robot = yourdfpy.URDF.load(io.BytesIO(text.encode()), build_scene_graph=False,
+                                       load_meshes=False)
+            assert robot.actuated_joint_names == list(
+                probe.messages(f"{ns}/joint_states")[0].name)
         # Command /a only: /a starts (wait_for_command) and runs its duration; /b keeps holding.
         wait_for(lambda: pub_a.get_subscription_count() > 0, what="/a's command subscription")
         pub_a.publish(Float64MultiArray(data=[0.5, -0.5]))
@@ -138,6 +154,7 @@ def test_two_simulators_side_by_side_under_namespaces():
         assert max(nanoseconds(m.header.stamp) for m in ran_a) == 200_000_000
         assert any(list(m.effort)[0] == 0.5 for m in ran_a)
         assert not probe.messages("/joint_states")  # nothing on the root namespace
+        assert not probe.messages("/robot_description")
     finally:
         probe.close()
         for proc in (a, b):
