@@ -32,7 +32,7 @@ MUJOCO_INTEGRATORS = {
 methods map to ``RK4``)."""
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``vjm export`` on the ``vjm`` subparsers."""
     from vjm_ros.formats.urdf_out import ZERO_POSES
 

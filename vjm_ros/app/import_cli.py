@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register the ``import`` subcommand on the ``vjm`` subparsers ``sub``."""
     p = sub.add_parser("import", help="a .sdf, .urdf or MJCF .xml model as scene YAML")
     p.add_argument("model", type=Path, help="the model file (.sdf, .urdf or MJCF .xml)")

@@ -22,10 +22,14 @@ from __future__ import annotations
 
 import json
 import textwrap
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from vjm_ros.core.errors import ConfigurationError
+
+if TYPE_CHECKING:
+    import argparse
 
 KEYS = {
     "scene": "the scene's name",
@@ -70,7 +74,7 @@ def _epilog() -> str:
             f"exit codes:\n{rows(EXIT_CODES, 3)}")
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Register ``vjm model`` on the ``vjm`` sub-command parser."""
     import argparse
 
@@ -111,7 +115,7 @@ def _pairs(items: list[str], flag: str) -> dict[str, float]:
     return out
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     """The command: returns the exit code."""
     # imported here: every vjm command registers this parser, only `vjm model` needs these
     from vjm_ros.control import ClosedChainModel

@@ -22,10 +22,11 @@ import io
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 
-def precompile(log=print) -> float:
+def precompile(log: Callable[[str], object] = print) -> float:
     """Compile (or load) every entry point; returns the wall time taken, s."""
     from vjm_ros.jit import compile_server, tiers
 

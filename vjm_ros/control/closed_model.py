@@ -49,6 +49,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from vjm_ros.control.arguments import number_array, real, vector
 from vjm_ros.control.compiled import preload_direction, velocity_map
@@ -97,6 +98,9 @@ stretched, ``cond(A_v) = 1``) it gives 1.6e-16 m/rad for a true zero; ``cond(A_v
 that, and what it refuses is far beyond any actuator: on five_bar it refuses elbows bent by less
 than 8e-9 rad, where 1 m/s^2 of the pin needs more than 1e7 N m (1 N m with the elbows bent by
 0.1 rad)."""
+
+JointValues = ArrayLike | Mapping[str, float]
+"""Joint values in scene order (array_like, shape (n,)) or a ``{joint: value}`` map."""
 
 __all__ = ["ClosedChainModel", "ReducedDynamics"]
 
@@ -219,7 +223,7 @@ class ClosedChainModel:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_scene(cls, scene: str | Path | Scene, independent: Sequence[str] | None = None,
-                   **kwargs):
+                   **kwargs: float | bool | None) -> ClosedChainModel:
         """From a built-in scene name, a scene file, or a loaded :class:`Scene`."""
         if not isinstance(scene, Scene):
             scene = load_scene(scene)
@@ -227,12 +231,13 @@ class ClosedChainModel:
 
     @classmethod
     def from_yaml(cls, text: str, independent: Sequence[str] | None = None,
-                  source: str = "scene_description", **kwargs):
+                  source: str = "scene_description",
+                  **kwargs: float | bool | None) -> ClosedChainModel:
         """From scene YAML text, e.g. what the node publishes on ``~/scene_description``."""
         return cls(parse_scene(text, source=source).model, independent, **kwargs)
 
     # ------------------------------------------------------------------ arguments
-    def coordinates(self, values, name: str = "q") -> np.ndarray:
+    def coordinates(self, values: JointValues, name: str = "q") -> np.ndarray:
         """A full coordinate vector from an array in scene order or a ``{joint: value}`` map.
 
         Raises
@@ -274,12 +279,12 @@ class ClosedChainModel:
         return terms.residual[rows].copy(), terms.bias[rows].copy(), terms.jacobian[rows].copy()
 
     # ------------------------------------------------------------------ kinematics
-    def forward_kinematics(self, q, point: str) -> np.ndarray:
+    def forward_kinematics(self, q: JointValues, point: str) -> np.ndarray:
         """World position of a named point, shape (2,), m."""
         q = self.coordinates(q)
         return self._point(point, q)[0]
 
-    def link_frame(self, q, link: str) -> tuple[np.ndarray, float]:
+    def link_frame(self, q: JointValues, link: str) -> tuple[np.ndarray, float]:
         """Origin (m, shape (2,)) and absolute angle (rad) of a link's frame."""
         q = self.coordinates(q)
         if link not in self.model.link_names:
@@ -289,17 +294,18 @@ class ClosedChainModel:
         kin = self.mechanism.kinematics(q)
         return kin.origin[i].copy(), float(kin.theta[i])
 
-    def closure_residual(self, q) -> np.ndarray:
+    def closure_residual(self, q: JointValues) -> np.ndarray:
         """``C(q)``, shape (r,), m or rad."""
         q = self.coordinates(q)
         return self.mechanism.terms(q, jacobian=False)[1].residual
 
-    def constraint_jacobian(self, q) -> np.ndarray:
+    def constraint_jacobian(self, q: JointValues) -> np.ndarray:
         """``A = dC/dq``, shape (r, n)."""
         q = self.coordinates(q)
         return self.mechanism.terms(q)[1].jacobian
 
-    def assemble(self, u, guess=None, tolerance: float = 1e-10) -> np.ndarray:
+    def assemble(self, u: ArrayLike, guess: JointValues | None = None,
+                 tolerance: float = 1e-10) -> np.ndarray:
         """The full coordinates with the independent ones at ``u``, the closures met.
 
         Parameters
@@ -361,16 +367,16 @@ class ClosedChainModel:
                 f"{self._row_closure[row]!r}; use dependent_velocities() for the dependent rates "
                 f"(or pass velocity_tolerance)")
 
-    def velocity_map(self, q) -> np.ndarray:
+    def velocity_map(self, q: JointValues) -> np.ndarray:
         """``S``, shape (n, d): ``qd = S ud``."""
         q = self.coordinates(q)
         return self._terms(q, np.zeros(self.n))[0]
 
-    def dependent_velocities(self, q, ud) -> np.ndarray:
+    def dependent_velocities(self, q: JointValues, ud: ArrayLike) -> np.ndarray:
         """Full joint rates ``qd = S ud``, shape (n,)."""
         return self.velocity_map(q) @ vector(ud, self.dof, "ud", "rad/s or m/s")
 
-    def singularity_measure(self, q, point: str | None = None) -> float:
+    def singularity_measure(self, q: JointValues, point: str | None = None) -> float:
         """How far the pose is from a singular configuration (0 at one).
 
         Parameters
@@ -400,7 +406,7 @@ class ClosedChainModel:
         a = self.constraint_jacobian(q)[:, self.dependent]
         return float(np.linalg.svd(a, compute_uv=False)[-1]) if a.size else math.inf
 
-    def task_jacobian(self, q, point: str) -> np.ndarray:
+    def task_jacobian(self, q: JointValues, point: str) -> np.ndarray:
         """``J_t``, shape (2, d): ``xd = J_t ud`` for a named point, m per rad (or m)."""
         q = self.coordinates(q)
         s_map = self._terms(q, np.zeros(self.n))[0]
@@ -423,14 +429,14 @@ class ClosedChainModel:
                 f" singularity_measure(q, point={point!r}) tells how close a pose is")
         return jt
 
-    def task_bias(self, q, qd, point: str) -> np.ndarray:
+    def task_bias(self, q: JointValues, qd: JointValues, point: str) -> np.ndarray:
         """``J s + Jdot qd``, shape (2,), m/s^2: ``xdd = J_t udd + task_bias``."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
         s = self._terms(q, qd)[1]
         _, a_bias, jac = self._point(point, q, qd)
         return jac @ s + a_bias
 
-    def reduced_dynamics(self, q, qd) -> ReducedDynamics:
+    def reduced_dynamics(self, q: JointValues, qd: JointValues) -> ReducedDynamics:
         """``M_r``, ``c_r``, ``g_r`` (and ``S``, ``s``, ``P``) at a state (see the module doc)."""
         q, qd = self.coordinates(q), self.coordinates(qd, "qd")
         s_map, s, a = self._terms(q, qd)
@@ -448,13 +454,13 @@ class ClosedChainModel:
 
     def inverse_dynamics(
         self,
-        q,
-        qd,
-        udd=None,
+        q: JointValues,
+        qd: JointValues,
+        udd: ArrayLike | None = None,
         *,
         point: str | None = None,
-        xdd=None,
-        weights=None,
+        xdd: ArrayLike | None = None,
+        weights: ArrayLike | None = None,
         preload: float = 0.0,
         respect_limits: bool = True,
     ) -> np.ndarray:

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from vjm_ros.control.arguments import number_array, real, vector
 from vjm_ros.control.errors import InfeasibleEffortsError
@@ -110,7 +111,8 @@ def inverse_weights(weights: object, m: int) -> np.ndarray:
     return 1.0 / wts
 
 
-def distribute(p: np.ndarray, w: np.ndarray, limits: np.ndarray, weights=None,
+def distribute(p: np.ndarray, w: np.ndarray, limits: np.ndarray,
+               weights: ArrayLike | None = None,
                preload: float = 0.0, names: Sequence[str] | None = None,
                direction: np.ndarray | None = None) -> np.ndarray:
     """Efforts ``tau`` with ``P tau = w``: minimum ``W``-norm, plus a preload, within limits.

@@ -53,7 +53,7 @@ class Circle(TaskPath):
     """A circle of radius ``size`` through ``start``, centre ``start - (size, 0)``,
     counter-clockwise."""
 
-    def shape(self, p):
+    def shape(self, p: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r, c, s = self.size, math.cos(p), math.sin(p)
         return r * np.array([c - 1.0, s]), r * np.array([-s, c]), r * np.array([-c, -s])
 
@@ -62,7 +62,7 @@ class FigureEight(TaskPath):
     """A figure-eight (lemniscate of Gerono) of half-width ``size`` centred on ``start``:
     ``start + size (sin p, sin p cos p)``."""
 
-    def shape(self, p):
+    def shape(self, p: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         a = self.size
         return (a * np.array([math.sin(p), 0.5 * math.sin(2 * p)]),
                 a * np.array([math.cos(p), math.cos(2 * p)]),

@@ -17,12 +17,16 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 from rclpy.clock import Clock as WallClock
 from rclpy.clock import ClockType
 from rosgraph_msgs.msg import Clock
 
 from vjm_ros.ros.runtime import raw_publish
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
 
 TOPIC = "/clock"
 CHECK_PERIOD = 1.0
@@ -67,7 +71,7 @@ class ClockOwner:
         Open the publisher now (``publish_clock`` at start).
     """
 
-    def __init__(self, node, notice: Callable[[str, str], None], publish: bool):
+    def __init__(self, node: Node, notice: Callable[[str, str], None], publish: bool) -> None:
         self._node = node
         self._notice = notice
         self.publisher = None

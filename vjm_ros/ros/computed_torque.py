@@ -28,6 +28,7 @@ inverse dynamics: :class:`~vjm_ros.control.closed_model.ClosedChainModel` ``plan
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -41,11 +42,16 @@ from vjm_ros.ros.conversions import joint_arrays, seconds
 from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.ros.scene_client import wait_for_scene_description
 
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
 
 class ComputedTorqueNode(ControllerNode):
     """Task-space computed torque (see the module documentation)."""
 
-    def __init__(self, *, context=None, parameter_overrides=None):
+    def __init__(self, *, context: Context | None = None,
+                 parameter_overrides: list[Parameter] | None = None) -> None:
         super().__init__("vjm_ct_controller", {
             "scene": "", "simulator": "vjm_sim_node", "path": "circle", "size": 0.05,
             "period": 2.0, "approach_time": 1.0, "kp": 400.0, "kd": 40.0, "preload": 0.0,

@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -54,6 +55,10 @@ from vjm_ros.ros.controller_base import ControllerNode
 from vjm_ros.ros.conversions import joint_arrays, seconds
 from vjm_ros.ros.runtime import run_node_until_signal
 from vjm_ros.scene.loader import load_scene
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
 
 # ---------------------------------------------------------------------------------------------
 # 1. Geometry: inverse kinematics of a five-bar (two two-link revolute chains sharing a tip pin)
@@ -280,7 +285,8 @@ class PdGravityLaw:
         return np.clip(tau, -self.limits, self.limits)
 
 
-def make_law(model: Model, q_start: np.ndarray, center=(0.7071, 0.5), radius: float = 0.1,
+def make_law(model: Model, q_start: np.ndarray, center: tuple[float, float] = (0.7071, 0.5),
+             radius: float = 0.1,
              period: float = 2.0, approach_time: float = 1.0, kp: float = 150.0,
              kd: float = 8.0) -> PdGravityLaw:
     """The example's control law for ``model`` starting at ``q_start`` (SI units)."""
@@ -309,7 +315,8 @@ class PdControllerNode(ControllerNode):
     simulated time goes on across a reset).
     """
 
-    def __init__(self, *, context=None, parameter_overrides=None):
+    def __init__(self, *, context: Context | None = None,
+                 parameter_overrides: list[Parameter] | None = None) -> None:
         super().__init__("vjm_pd_controller", {
             "scene": "five_bar", "simulator": "vjm_sim_node", "center_x": 0.7071,
             "center_y": 0.5, "radius": 0.1, "period": 2.0, "approach_time": 1.0, "kp": 150.0,

@@ -7,7 +7,9 @@ A controller commands one simulator: it publishes ``<simulator>/effort_commands`
 
 from __future__ import annotations
 
+from rclpy.context import Context
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 
@@ -20,7 +22,8 @@ class ControllerNode(Node):
     reset notice (``reset:`` on its events topic), for the subclass to start its motion over.
     """
 
-    def __init__(self, name: str, defaults: dict, *, context=None, parameter_overrides=None):
+    def __init__(self, name: str, defaults: dict, *, context: Context | None = None,
+                 parameter_overrides: list[Parameter] | None = None) -> None:
         super().__init__(name, context=context, parameter_overrides=parameter_overrides)
         self.params = {key: self.declare_parameter(key, value).value
                        for key, value in defaults.items()}

@@ -77,8 +77,10 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
@@ -175,8 +177,9 @@ class SimNode(Node):
         A parameter value, the scene or a log file cannot be used (nothing is left open).
     """
 
-    def __init__(self, *, context=None, parameter_overrides=None, node_name: str = NODE_NAME,
-                 namespace: str | None = None):
+    def __init__(self, *, context: Context | None = None,
+                 parameter_overrides: list[Parameter] | None = None, node_name: str = NODE_NAME,
+                 namespace: str | None = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides)
         for spec in PARAMETERS:

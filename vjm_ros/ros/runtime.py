@@ -15,17 +15,23 @@ from __future__ import annotations
 import os
 import threading
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.exceptions import InvalidHandle
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.impl.rcutils_logger import RcutilsLogger
+from rclpy.subscription import Subscription
 
 from vjm_ros.logs.signals import StopSignals
 from vjm_ros.realtime.gate import Gate
 
 if TYPE_CHECKING:
+    from rclpy.callback_groups import Entity
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+
     from vjm_ros.realtime.loop import TickLoop
 
 SPIN_TIMEOUT = 0.05
@@ -42,7 +48,7 @@ class Spinner:
         The tick loop's gate: callbacks run only while it is open (between realtime ticks).
     """
 
-    def __init__(self, executor, gate: Gate | None = None):
+    def __init__(self, executor: Executor, gate: Gate | None = None) -> None:
         self.executor = executor
         self.gate = gate
         self._stop = threading.Event()
@@ -88,23 +94,23 @@ class PolledGroup(CallbackGroup):
         Whether the tick loop takes the messages now (read by the executor thread).
     """
 
-    def __init__(self, polled) -> None:
+    def __init__(self, polled: Callable[[], bool]) -> None:
         super().__init__()
         self.polled = polled
 
-    def can_execute(self, entity) -> bool:
+    def can_execute(self, entity: Entity) -> bool:
         """Whether the executor may wait for and run the entity's callbacks now."""
         return not self.polled()
 
-    def beginning_execution(self, entity) -> bool:
+    def beginning_execution(self, entity: Entity) -> bool:
         """Callbacks of this group may run side by side (each takes its own message)."""
         return True
 
-    def ending_execution(self, entity) -> None:
+    def ending_execution(self, entity: Entity) -> None:
         """Nothing to release."""
 
 
-def raw_publish(publisher) -> Callable[[bytes], None]:
+def raw_publish(publisher: Publisher) -> Callable[[bytes], None]:
     """The publish of serialized messages of ``publisher`` (a ``rclpy.publisher.Publisher``).
 
     ``Publisher.publish(data)`` enters the publisher's handle (so that it cannot be destroyed
@@ -122,7 +128,9 @@ def raw_publish(publisher) -> Callable[[bytes], None]:
     return publisher.handle.publish_raw
 
 
-def take_all(subscriptions) -> list:
+def take_all(
+    subscriptions: Iterable[tuple[Subscription, Callable[..., object]]],
+) -> list[tuple[Callable[..., object], object]]:
     """Take every message waiting on ``subscriptions`` (pairs of subscription and handler) and
     return ``(handler, message)`` pairs in order of reception (the messages' received
     timestamps; within one subscription, the order taken)."""
@@ -162,7 +170,8 @@ class StopOnSignals(StopSignals):
             loop.stop()
 
 
-def run_node_until_signal(make_node, name: str, args: list[str] | None = None) -> int:
+def run_node_until_signal(make_node: Callable[[], Node], name: str,
+                          args: list[str] | None = None) -> int:
     """Console entry point of a controller node: build it, spin until SIGINT or SIGTERM.
 
     The process handles the signals itself (:class:`~vjm_ros.logs.signals.StopSignals`) and
@@ -203,7 +212,7 @@ def run_node_until_signal(make_node, name: str, args: list[str] | None = None) -
     return 0
 
 
-def raise_priority(priority: int, logger) -> None:
+def raise_priority(priority: int, logger: RcutilsLogger) -> None:
     """Put the calling thread under SCHED_FIFO at ``priority`` (0: leave it); warn if refused."""
     if priority <= 0:
         return

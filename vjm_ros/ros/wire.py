@@ -21,6 +21,7 @@ import numpy as np
 
 from vjm_ros.logs import cdr
 from vjm_ros.logs import messages as layouts
+from vjm_ros.sim.samples import Sample
 
 _pack_stamp = cdr.STAMP.pack_into
 _AT = cdr.STAMP_OFFSET
@@ -133,7 +134,7 @@ class MarkerWire:
         self._key: tuple | None = None
         self._layout: cdr.FixedLayout | None = None
 
-    def markers(self, sample, t: float, trace: Sequence[np.ndarray] = ()) -> bytes:
+    def markers(self, sample: Sample, t: float, trace: Sequence[np.ndarray] = ()) -> bytes:
         """Serialized ``visualization_msgs/MarkerArray`` of ``sample`` stamped ``t`` (s), with the
         tip traces ``trace``."""
         specs = layouts.marker_specs(sample, self.force_scale, trace=trace)

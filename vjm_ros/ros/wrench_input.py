@@ -10,16 +10,21 @@ wrench that has one is taken without it, with a warning naming the fields.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from geometry_msgs.msg import WrenchStamped
 
 from vjm_ros.realtime.wrenches import WrenchBuffer
 
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.subscription import Subscription
+
 TOPIC = "~/external_wrench"
 
 
-def subscribe_external_wrench(node, buffer: Callable[[], WrenchBuffer | None],
-                              warn: Callable[[str, str], None]):
+def subscribe_external_wrench(node: Node, buffer: Callable[[], WrenchBuffer | None],
+                              warn: Callable[[str, str], None]) -> Subscription:
     """Subscribe ``node`` to :data:`TOPIC`, each message submitted to ``buffer()`` (the tick
     loop's wrenches at the time it arrives); refusals and dropped out-of-plane components go to
     ``warn(key, text)``."""

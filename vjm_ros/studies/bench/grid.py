@@ -306,7 +306,7 @@ def grid_rows(grid: Grid, mujoco: bool, extra: dict | None = None) -> list[RowCo
     return rows
 
 
-def jsonable(x):
+def jsonable(x: object) -> object:
     if isinstance(x, dict):
         return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):

@@ -13,6 +13,7 @@ import dataclasses
 import functools
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import yaml
@@ -43,7 +44,8 @@ def _named_parts(doc: dict):
                    joint.get("name", f"{cname}_joint{i + 1}"), joint)
 
 
-def apply_parameters(base: Scene, parameters: dict, where=lambda key: f"grid.{key}") -> Scene:
+def apply_parameters(base: Scene, parameters: dict,
+                     where: Callable[[str], str] = lambda key: f"grid.{key}") -> Scene:
     """The scene with a case's parameters applied.
 
     ``mass|length|inertia.<link>`` set the link's value; ``initial.<joint>`` the joint's initial

@@ -9,11 +9,17 @@ axis that takes words (the integrator, say), else per scene.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.studies.sweep.engine import Sweep
 from vjm_ros.studies.sweep.run import MEASURES
 from vjm_ros.studies.sweep.spec import SweepSpec
+
+if TYPE_CHECKING:
+    from matplotlib.axis import Axis
 
 PLOTTABLE = tuple(m for m in MEASURES if m not in ("status", "message", "finite"))
 """Measures a figure can show."""
@@ -22,7 +28,7 @@ UNITS = {"diverged_at": "s", "max_closure_error": "m or rad", "rms_closure_error
          "tip_deviation": "m", "wall_time": "s"}
 
 
-def readable_axis(axis, set_scale, values: list[float]) -> None:
+def readable_axis(axis: Axis, set_scale: Callable[[str], object], values: list[float]) -> None:
     """A log axis with at most a few labelled ticks, or a linear one where the values span less
     than a decade (where log ticks would all be minor ones, their labels crowding) or are not
     all positive."""
@@ -77,7 +83,7 @@ def _group_key(spec: SweepSpec) -> str:
     return "scene"
 
 
-def plot_sweep(sweep, y: str, x: str, path: str | Path) -> Path:
+def plot_sweep(sweep: Sweep, y: str, x: str, path: str | Path) -> Path:
     """Measure ``y`` against ``x`` of every row of the table with both (PNG, log axes where the
     values are positive)."""
     import matplotlib

@@ -15,8 +15,12 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vjm_ros.core.errors import ConfigurationError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 RESULTS_CSV = "results.csv"
 RESULTS_PARQUET = "results.parquet"
@@ -27,7 +31,7 @@ INTEGER_COLUMNS = ("substeps",)
 BOOLEAN_COLUMNS = ("projection", "finite")
 
 
-def column_type(name: str):
+def column_type(name: str) -> pa.DataType:
     """The Parquet (Arrow) type of a column: strings, whole numbers, booleans, else float64."""
     import pyarrow as pa
 
@@ -40,7 +44,7 @@ def column_type(name: str):
     return pa.float64()
 
 
-def cell(value) -> str:
+def cell(value: object) -> str:
     """A value as CSV text: floats round-trippable and short, None empty."""
     if value is None:
         return ""

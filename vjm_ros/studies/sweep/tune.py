@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -30,6 +31,9 @@ from vjm_ros.scene import load_scene
 from vjm_ros.studies.bench.analysis import lowest_front
 from vjm_ros.studies.sweep.spec import SweepSpec
 from vjm_ros.studies.sweep.summary import readable_axis
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 OMEGA_N = tuple(float(w) for w in np.geomspace(10.0, 3000.0, 12).round(1))
 """Natural frequencies tried, rad/s (10 to 3000, log-spaced)."""
@@ -135,7 +139,8 @@ def plot_tuning(rows: list[dict], front: list[dict], chosen: dict | None, path: 
     return Path(path)
 
 
-def tuning_figure(rows: list[dict], front: list[dict], chosen: dict | None, title: str):
+def tuning_figure(rows: list[dict], front: list[dict], chosen: dict | None,
+                  title: str) -> Figure:
     """The figure of :func:`plot_tuning` (a matplotlib Figure, Agg canvas)."""
     import matplotlib
 
