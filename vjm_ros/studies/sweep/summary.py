@@ -14,12 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.studies.sweep.engine import Sweep
 from vjm_ros.studies.sweep.run import MEASURES
 from vjm_ros.studies.sweep.spec import SweepSpec
 
 if TYPE_CHECKING:
     from matplotlib.axis import Axis
+
+    from vjm_ros.studies.sweep.engine import Sweep
 
 PLOTTABLE = tuple(m for m in MEASURES if m not in ("status", "message", "finite"))
 """Measures a figure can show."""
