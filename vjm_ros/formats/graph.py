@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -198,7 +199,7 @@ class Pose:
         return Pose(self.rotation @ other.rotation,
                     self.rotation @ other.position + self.position)
 
-    def apply(self, point) -> np.ndarray:
+    def apply(self, point: np.ndarray) -> np.ndarray:
         """A local point in the outer frame, (3,)."""
         return self.rotation @ np.asarray(point, dtype=float) + self.position
 
@@ -227,7 +228,8 @@ def parse_xml(path: str) -> ET.Element:
     return tree.getroot()
 
 
-def numbers(text: str | None, count: int, path: str, where: str, default=None) -> list[float]:
+def numbers(text: str | None, count: int, path: str, where: str,
+            default: Sequence[float] | None = None) -> list[float]:
     """``count`` numbers written in ``text`` separated by spaces (``default`` if absent)."""
     if text is None or not text.strip():
         if default is None:

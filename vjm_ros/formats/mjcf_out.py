@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -55,6 +56,9 @@ from vjm_ros.core.model import ANGLE, GROUND, HINGE, REVOLUTE, SLIDER, Model
 from vjm_ros.core.readers import forward_kinematics
 from vjm_ros.formats.urdf_out import number, numbers
 from vjm_ros.scene.plant import ActuatorDynamics, Plant
+
+if TYPE_CHECKING:
+    import mujoco
 
 DEFAULT_SOLREF = (0.02, 1.0)
 """MuJoCo's default ``solref``: time constant 0.02 s, damping ratio 1."""
@@ -122,7 +126,7 @@ def carriage_mass(model: Model, settings: MjcfSettings) -> float:
     return CARRIAGE_MASS_RATIO * min(masses) if masses else settings.inertia_epsilon
 
 
-def stiffen_carriages(mj_model, model: Model) -> None:
+def stiffen_carriages(mj_model: mujoco.MjModel, model: Model) -> None:
     """Give each carriage the constraint weight (``body_invweight0``) of its closure's link.
 
     MuJoCo's regularization of an equality grows with its bodies' inverse masses at ``qpos0``;

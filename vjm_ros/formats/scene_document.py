@@ -34,7 +34,7 @@ def plain(x: float) -> float:
 class SceneWriter:
     """The document-writing half of the reduction (attributes set by the reducer)."""
 
-    def local(self, link: str, p2) -> list[float]:
+    def local(self, link: str, p2: np.ndarray) -> list[float]:
         """A point of the plane in ``link``'s frame at the zero pose, ``[s, w]``."""
         o, psi = self.frame[link]
         d = np.asarray(p2) - o
@@ -69,7 +69,7 @@ class SceneWriter:
         doc["defaults"] = {"integrator": "rk4", "rate": 1000, "duration": 10}
         return doc
 
-    def chain_doc(self, c: int, frames) -> dict:
+    def chain_doc(self, c: int, frames: tuple[float, np.ndarray, list]) -> dict:
         ground_psi, ground_origin, rows = frames
         links = []
         theta, psi_prev = ground_psi, ground_psi
@@ -99,7 +99,7 @@ class SceneWriter:
         return {"name": f"chain{c + 1}", "origin": [plain(x) for x in ground_origin],
                 "angle": plain(ground_psi), "length": 0.0, "links": links}
 
-    def end(self, body: str, p) -> dict:
+    def end(self, body: str, p: np.ndarray) -> dict:
         """A closure end: a link point, or a ground point."""
         k = self.group_of[body]
         if k == WORLD:

@@ -28,7 +28,7 @@ import numpy as np
 
 from vjm_ros.logs import events
 from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
-from vjm_ros.sim.samples import SampleBlock
+from vjm_ros.sim.samples import Sample, SampleBlock
 
 if TYPE_CHECKING:
     from vjm_ros.logs.mcap_recorder import McapRecorder
@@ -78,7 +78,7 @@ class Recorder:
     _one = None  # the block of one row that write() fills
 
     @atomic
-    def write(self, sample) -> None:
+    def write(self, sample: Sample) -> None:
         """Log one tick's :class:`~vjm_ros.sim.samples.Sample`: a block of one row
         (``write_block``, which the subclasses implement)."""
         if self._one is None:

@@ -187,7 +187,7 @@ class BlockFanOut:
             return self._make_block()
         return self._free.get()
 
-    def put(self, block) -> None:
+    def put(self, block: object) -> None:
         """Hand a filled block to every consumer; raises a consumer's exception if one failed."""
         self._raise_error()
         if not self._queues:

@@ -24,11 +24,14 @@ from collections.abc import Sequence
 import numpy as np
 import zstandard
 from mcap._chunk_builder import ChunkBuilder
+from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import ChunkIndex, Message
 from mcap.writer import CompressionType, IndexType, Writer
 
+from vjm_ros.core.model import Model
 from vjm_ros.logs import cdr, messages
+from vjm_ros.sim.samples import SampleBlock
 
 RECORD_HEADER = struct.Struct("<BQHIQQ")
 """Opcode, record length, channel id, sequence, log time, publish time of a Message record."""
@@ -45,7 +48,8 @@ class BulkIndex:
         self.runs: list[tuple] = []
         self.count = 0
 
-    def add(self, times, offsets, shift: int = 0) -> None:
+    def add(self, times: Sequence[int] | np.ndarray, offsets: Sequence[int] | np.ndarray,
+            shift: int = 0) -> None:
         """Entries of messages at ``times`` (ns) and chunk offsets ``offsets + shift`` (bytes),
         in file order (arrays or sequences of int, kept until :meth:`record`)."""
         self.runs.append((times, offsets, shift))
@@ -65,7 +69,7 @@ class BulkIndex:
         return MESSAGE_INDEX_HEADER.pack(Opcode.MESSAGE_INDEX, 6 + entries.nbytes,
                                          self.channel_id, entries.nbytes) + entries.tobytes()
 
-    def write(self, stream) -> None:
+    def write(self, stream: RecordBuilder) -> None:
         """Write :meth:`record` to ``stream`` (the ``mcap`` writer's record builder)."""
         stream.write(self.record())
 
@@ -120,7 +124,7 @@ class BlockChunkBuilder(ChunkBuilder):
         self._span(message.log_time, message.log_time, 1)
         self._index(message.channel_id).add((message.log_time,), (offset,))
 
-    def add_run(self, data, times: np.ndarray, starts: np.ndarray,
+    def add_run(self, data: memoryview, times: np.ndarray, starts: np.ndarray,
                 columns: Sequence[tuple[int, int]], markers: tuple | None) -> None:
         """Append the Message records ``data`` of ticks logged at ``times`` (ns, never
         decreasing), each tick's records starting at byte ``starts`` of ``data``, with one
@@ -185,7 +189,7 @@ class BlockWriter(Writer):
         self._Writer__chunk_builder = self._builder
         self._zstd = zstandard.ZstdCompressor(level=zstd_level)
 
-    def add_run(self, data, times: np.ndarray, starts: np.ndarray,
+    def add_run(self, data: memoryview, times: np.ndarray, starts: np.ndarray,
                 columns: Sequence[tuple[int, int]], markers: tuple | None) -> None:
         """Add a run of ticks' Message records to the open chunk (see
         :meth:`BlockChunkBuilder.add_run`); statistics as :meth:`add_message` keeps them; the
@@ -327,7 +331,7 @@ class BlockEncoder:
         exact state on ``/<node>/ground_truth/joint_states``.
     """
 
-    def __init__(self, model, channels: dict[str, int], topics: messages.Topics,
+    def __init__(self, model: Model, channels: dict[str, int], topics: messages.Topics,
                  marker_every: int, force_scale: float, measured: bool = False):
         k = len(model.force_names)
         self.force_scale = float(force_scale)
@@ -405,7 +409,7 @@ class BlockEncoder:
             out.append(_xyz(arrow))
         return out
 
-    def encode(self, block, ns: np.ndarray, first: int) -> EncodedBlock:
+    def encode(self, block: SampleBlock, ns: np.ndarray, first: int) -> EncodedBlock:
         """Records of the block's rows (``len(ns)``) logged at ``ns`` (ns), the first being
         sample number ``first`` of the recording (valid until the next call: the records are
         written into buffers the encoder keeps)."""

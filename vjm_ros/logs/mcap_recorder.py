@@ -58,6 +58,7 @@ from vjm_ros.logs import (
     rosbag2,
     tick_of,
 )
+from vjm_ros.sim.samples import SampleBlock
 
 INDEX_BYTES_PER_HOUR = 16 * 2**20
 """Bound on what the writer keeps until the file is finalized, per recorded hour at 1 kHz with
@@ -239,7 +240,7 @@ class McapRecorder(Recorder):
         self._put(self._channels[self.topics.events], cdr.encode_string(text), ns)
 
     @atomic
-    def write_block(self, block) -> None:
+    def write_block(self, block: SampleBlock) -> None:
         """Log every row of a :class:`~vjm_ros.sim.samples.SampleBlock`, encoded in bulk.
 
         The messages, their times, sequence numbers and order do not depend on how the ticks

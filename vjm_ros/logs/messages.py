@@ -33,8 +33,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from vjm_ros.sim.samples import Sample
 
 FRAME_ID = "world"
 ENERGY_LABELS = ("kinetic", "potential", "constraint", "total")
@@ -141,7 +145,7 @@ def labelled_layout(labels: Sequence[str], size: int) -> dict:
 
 
 # ---------------------------------------------------------------- per-tick messages
-def joint_state(joint_names: Sequence[str], sample, ns: int) -> dict:
+def joint_state(joint_names: Sequence[str], sample: Sample, ns: int) -> dict:
     """``sensor_msgs/JointState`` of every joint.
 
     Parameters
@@ -162,7 +166,7 @@ def joint_state(joint_names: Sequence[str], sample, ns: int) -> dict:
     }
 
 
-def constraint_forces(force_names: Sequence[str], sample) -> dict:
+def constraint_forces(force_names: Sequence[str], sample: Sample) -> dict:
     """``std_msgs/Float64MultiArray`` of the constraint force of every closure, then of every
     stop.
 
@@ -186,7 +190,7 @@ def constraint_forces(force_names: Sequence[str], sample) -> dict:
     }
 
 
-def energy(sample) -> dict:
+def energy(sample: Sample) -> dict:
     """``std_msgs/Float64MultiArray`` ``[kinetic, potential, constraint, total]``, J.
 
     Layout: one dimension per entry, labelled ``kinetic``, ``potential``, ``constraint``,
@@ -195,7 +199,7 @@ def energy(sample) -> dict:
     return {"layout": labelled_layout(ENERGY_LABELS, 1), "data": sample.energy.tolist()}
 
 
-def wrench(sample, index: int, ns: int) -> dict:
+def wrench(sample: Sample, index: int, ns: int) -> dict:
     """``geometry_msgs/WrenchStamped`` of closure ``index``, frame ``world``.
 
     The wrench acts at the closure's point ``Pa`` (``sample.closure_points[index]``), not at the
@@ -290,7 +294,7 @@ FORCE_SCALE = 0.01
 
 
 def marker_specs(
-    sample, force_scale: float = FORCE_SCALE, trace: Sequence[np.ndarray] = ()
+    sample: Sample, force_scale: float = FORCE_SCALE, trace: Sequence[np.ndarray] = ()
 ) -> list[tuple]:
     """What the mechanism's markers draw, once for the logs and the node.
 
@@ -336,7 +340,7 @@ def marker_specs(
     return specs
 
 
-def markers(sample, ns: int, force_scale: float = FORCE_SCALE,
+def markers(sample: Sample, ns: int, force_scale: float = FORCE_SCALE,
             trace: Sequence[np.ndarray] = ()) -> dict:
     """``visualization_msgs/MarkerArray`` drawing the mechanism (:func:`marker_specs`).
 

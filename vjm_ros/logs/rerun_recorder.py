@@ -68,6 +68,7 @@ from vjm_ros.logs import (
     tick_of,
 )
 from vjm_ros.logs.storage import VIEWER_SCHEMES
+from vjm_ros.sim.samples import SampleBlock
 
 TIMELINE = "sim_time"
 ROOT = "mechanism"
@@ -329,7 +330,7 @@ class RerunRecorder(Recorder):
 
     # ------------------------------------------------------------------ writing
     @atomic
-    def write_block(self, block) -> None:
+    def write_block(self, block: SampleBlock) -> None:
         """Buffer every row of a :class:`~vjm_ros.sim.samples.SampleBlock` by array slices.
 
         Logs what :meth:`write` of each row would (the same buffers, sends and geometry), except

@@ -27,7 +27,7 @@ import numpy as np
 
 from vjm_ros.core.model import Model
 from vjm_ros.logs.background import BlockFanOut, Consumer
-from vjm_ros.sim.samples import BLOCK_FIELDS, SampleBlock
+from vjm_ros.sim.samples import BLOCK_FIELDS, Sample, SampleBlock
 
 CAPACITY = 100
 """Rows per block: 0.1 s at 1 kHz. Per tick an MCAP log then costs about 7 µs (23 µs in blocks
@@ -98,7 +98,7 @@ class LogRows:
         """Rows in the block being filled (not handed over yet)."""
         return self.block.rows
 
-    def add(self, sample) -> None:
+    def add(self, sample: Sample) -> None:
         """Copy one tick's :class:`~vjm_ros.sim.samples.Sample` (geometry included) into the
         block; hand the block over when it is full or its first row has waited ``max_wait``."""
         block = self.block

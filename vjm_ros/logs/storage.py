@@ -20,6 +20,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from vjm_ros.core.errors import ConfigurationError
+from vjm_ros.logs import Recorder
+from vjm_ros.sim.samples import Sample, SampleBlock
 
 MIN_FREE_BYTES = 64 * 2**20
 """Free space required on a log's file system at start, bytes."""
@@ -98,7 +100,7 @@ class LogWriters:
         self.failed: list[tuple[str, str]] = []
         self._on_failure = on_failure
 
-    def write_to(self, rec, sample) -> None:
+    def write_to(self, rec: Recorder, sample: Sample) -> None:
         """Write ``sample`` to one recorder (nothing if it was given up)."""
         if rec not in self.active:
             return
@@ -107,13 +109,13 @@ class LogWriters:
         except OSError as exc:
             self._give_up(rec, exc)
 
-    def write_block(self, block) -> None:
+    def write_block(self, block: SampleBlock) -> None:
         """Write every row of a :class:`~vjm_ros.sim.samples.SampleBlock` to every working
         recorder: in bulk where the recorder has ``write_block``, else sample by sample."""
         for rec in list(self.active):
             self.write_block_to(rec, block)
 
-    def write_block_to(self, rec, block) -> None:
+    def write_block_to(self, rec: Recorder, block: SampleBlock) -> None:
         """:meth:`write_block` for one recorder (nothing if it was given up). Recorders may be
         written by threads of their own, one thread per recorder."""
         if rec not in self.active:
@@ -154,7 +156,7 @@ class LogWriters:
         for rec in list(self.active):
             self.close_one(rec)
 
-    def close_one(self, rec) -> None:
+    def close_one(self, rec: Recorder) -> None:
         """Close one working recorder (nothing if it was given up or closed); a failure to
         finalize counts as a failed log."""
         if rec not in self.active:

@@ -8,6 +8,7 @@ it), builds the :class:`~vjm_ros.core.model.Model`, checks the inertia and close
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -121,7 +122,7 @@ class SceneBuilder(KeyReader):
         self.joint_index: dict[str, int] = {}
 
     # -------------------------------------------------------------- document
-    def build(self, doc) -> Scene:
+    def build(self, doc: object) -> Scene:
         """The scene described by the document ``doc``."""
         doc = self.mapping(doc, "", TOP_KEYS)
         name = self.name(self.require(doc, "name", ""), "name")
@@ -159,7 +160,7 @@ class SceneBuilder(KeyReader):
         model, residual = self.close(model, doc.get("assemble"))
         return Scene(model, self.source, self.text, gains, defaults, residual, plant)
 
-    def chains(self, value):
+    def chains(self, value: object) -> tuple[list[Chain], list[Link], list[Joint]]:
         """Chains, links and joints, in scene order."""
         value = self.sequence(value, "chains", min_len=1)
         chains, links, joints = [], [], []
@@ -268,14 +269,14 @@ class SceneBuilder(KeyReader):
             raise self.fail(f"{key}.restitution", "a number in [0, 1]", doc["restitution"])
         return replace(joint, range=(lo, hi), restitution=e)
 
-    def link_ref(self, value, key: str) -> int:
+    def link_ref(self, value: object, key: str) -> int:
         """Index of the link named ``value``."""
         lname = self.string(value, key)
         if lname not in self.link_index:
             raise self.fail(key, f"a link of the scene ({_listing(self.link_index)})", lname)
         return self.link_index[lname]
 
-    def point(self, value, key: str) -> PointRef:
+    def point(self, value: object, key: str) -> PointRef:
         """A ground point ``{ground: [x, y]}`` or a link point ``{link: L, at: ...}``."""
         value = self.mapping(value, key, {"link", "at", "ground"})
         if "ground" in value:
@@ -299,7 +300,7 @@ class SceneBuilder(KeyReader):
             raise self.fail(f"{key}.at", "'tip', 'origin', 'com' or [s, w] in the link frame", at)
         return PointRef(li, local)
 
-    def closures(self, value):
+    def closures(self, value: object) -> list[Closure]:
         """The closures (docs/design.md section 2)."""
         value = self.sequence(value, "closures", max_len=MAX_CLOSURES)
         out, names = [], set()
@@ -352,14 +353,14 @@ class SceneBuilder(KeyReader):
                                    offset=offset))
         return out
 
-    def joint_ref(self, value, key: str) -> int:
+    def joint_ref(self, value: object, key: str) -> int:
         """Index of the joint named ``value``."""
         jname = self.string(value, key)
         if jname not in self.joint_index:
             raise self.fail(key, f"a joint of the scene ({_listing(self.joint_index)})", jname)
         return self.joint_index[jname]
 
-    def actuators(self, value):
+    def actuators(self, value: object) -> tuple[list[Actuator], list[ActuatorDynamics]]:
         """Actuators, one per actuated joint, and their dynamics (gear, lag, delay)."""
         value = self.sequence(value, "actuators")
         out, seen, dynamics = [], set(), []
@@ -384,7 +385,7 @@ class SceneBuilder(KeyReader):
                 key=key))
         return out, dynamics
 
-    def sensors(self, value, joints) -> JointSensors | None:
+    def sensors(self, value: object, joints: Sequence[Joint]) -> JointSensors | None:
         """The ``sensors`` section: what ``joint_states`` measures (None without it).
 
         Position and velocity values of a revolute joint are in the file's angle unit (per
@@ -415,7 +416,9 @@ class SceneBuilder(KeyReader):
             raise self.fail(f"{key}.seed", "a whole number from 0 to 2**63 - 1", seed)
         return JointSensors(tuple(channels), delay, seed)
 
-    def plant(self, dynamics, sensors, defaults: dict) -> Plant:
+    def plant(
+        self, dynamics: Sequence[ActuatorDynamics], sensors: JointSensors | None, defaults: dict
+    ) -> Plant:
         """The plant keys; delays checked against ``defaults.rate`` when the scene gives it
         (the simulator checks them at the rate it runs)."""
         if "rate" in defaults:
@@ -434,7 +437,9 @@ class SceneBuilder(KeyReader):
             dynamics = []  # the plain actuators of a scene without these keys
         return Plant(tuple(dynamics), sensors, self.source)
 
-    def points(self, value, chains, links):
+    def points(
+        self, value: object, chains: Sequence[Chain], links: Sequence[Link]
+    ) -> list[NamedPoint]:
         """Chain tips plus the named points of the scene."""
         out = [
             NamedPoint(f"{ch.name}_tip", PointRef(ch.links[-1], (links[ch.links[-1]].length, 0.0)))
@@ -455,7 +460,7 @@ class SceneBuilder(KeyReader):
             out.append(NamedPoint(pname, ref))
         return out
 
-    def loads(self, value) -> tuple[Load, ...]:
+    def loads(self, value: object) -> tuple[Load, ...]:
         """The ``loads`` section: constant forces (world frame, N) and torques (N m) on links."""
         out, names = [], set()
         for k, item in enumerate(self.sequence(value, "loads", max_len=MAX_CLOSURES)):
@@ -474,7 +479,7 @@ class SceneBuilder(KeyReader):
                                                            f"{key}.torque")))
         return tuple(out)
 
-    def gains(self, value) -> dict:
+    def gains(self, value: object) -> dict:
         """The ``closure_method`` section."""
         allowed = {"method", "kp", "kv", "omega_n", "zeta", "alpha", "beta", "projection"}
         value = self.mapping(value, "closure_method", allowed)
@@ -498,7 +503,7 @@ class SceneBuilder(KeyReader):
             out["projection"] = value["projection"]
         return out
 
-    def defaults(self, value) -> dict:
+    def defaults(self, value: object) -> dict:
         """The ``defaults`` section (run settings)."""
         from vjm_ros.core.integrators import INTEGRATORS
 
@@ -536,7 +541,7 @@ class SceneBuilder(KeyReader):
             f"smallest eigenvalue {float(ev[0]):.3g}",
         )
 
-    def close(self, model: Model, spec) -> tuple[Model, float]:
+    def close(self, model: Model, spec: object) -> tuple[Model, float]:
         """Check the closures at t = 0, or assemble them if the scene asks for it."""
         if spec is None:
             q, _ = model.initial_state()

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import re
 import reprlib
+from collections.abc import Collection
 
 from vjm_ros.core.errors import SceneError
 from vjm_ros.scene.limits import MAX_LINKS, MAX_MAGNITUDE, MAX_STRING, TOP_KEY
@@ -71,13 +72,13 @@ class KeyReader:
         """The error to raise for ``key``."""
         return SceneError(self.source, key, expected, _shown(found))
 
-    def require(self, value: dict, name: str, key: str, expected: str = "a required key"):
+    def require(self, value: dict, name: str, key: str, expected: str = "a required key") -> object:
         """``value[name]``, or an error naming the missing key."""
         if name not in value:
             raise self.fail(_key(key, name), expected, "missing")
         return value[name]
 
-    def mapping(self, value, key: str, allowed: set[str] | None = None) -> dict:
+    def mapping(self, value: object, key: str, allowed: set[str] | None = None) -> dict:
         """``value`` if it is a mapping with string keys out of ``allowed``."""
         if not isinstance(value, dict):
             raise self.fail(key or TOP_KEY, "a mapping", value)
@@ -95,7 +96,7 @@ class KeyReader:
             return {} if name in ("closure_method", "defaults", "units") else []
         return value
 
-    def sequence(self, value, key: str, min_len: int = 0, max_len: int = MAX_LINKS) -> list:
+    def sequence(self, value: object, key: str, min_len: int = 0, max_len: int = MAX_LINKS) -> list:
         """``value`` if it is a list of ``min_len`` to ``max_len`` entries."""
         if not isinstance(value, list):
             raise self.fail(key, "a list", value)
@@ -106,7 +107,7 @@ class KeyReader:
         return value
 
     def number(
-        self, value, key: str, minimum: float | None = None, positive: bool = False
+        self, value: object, key: str, minimum: float | None = None, positive: bool = False
     ) -> float:
         """``value`` as a finite float within :data:`MAX_MAGNITUDE` and the given bounds."""
         if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -122,17 +123,17 @@ class KeyReader:
             raise self.fail(key, f"a number >= {minimum:g}", value)
         return v
 
-    def angle(self, value, key: str) -> float:
+    def angle(self, value: object, key: str) -> float:
         """An angle in the scene's unit, in radians."""
         return self.number(value, key) * self.angle_scale
 
-    def vector(self, value, key: str) -> tuple[float, float]:
+    def vector(self, value: object, key: str) -> tuple[float, float]:
         """A planar vector ``[x, y]``."""
         if not isinstance(value, list) or len(value) != 2:
             raise self.fail(key, "a list of two numbers [x, y]", value)
         return (self.number(value[0], f"{key}[0]"), self.number(value[1], f"{key}[1]"))
 
-    def string(self, value, key: str) -> str:
+    def string(self, value: object, key: str) -> str:
         """A non-empty string of at most :data:`MAX_STRING` characters."""
         if not isinstance(value, str) or not value.strip():
             raise self.fail(key, "a non-empty string", value)
@@ -140,14 +141,14 @@ class KeyReader:
             raise self.fail(key, f"a string of at most {MAX_STRING} characters", value)
         return value
 
-    def name(self, value, key: str) -> str:
+    def name(self, value: object, key: str) -> str:
         """An identifier: letters, digits and ``_``, not starting with a digit."""
         s = self.string(value, key)
         if not all(ch.isalnum() or ch == "_" for ch in s) or s[0].isdigit():
             raise self.fail(key, "a name of letters, digits and '_' (not starting with a digit)", s)
         return s
 
-    def choice(self, value, key: str, options) -> str:
+    def choice(self, value: object, key: str, options: Collection[str]) -> str:
         """One of the strings ``options``."""
         if not isinstance(value, str) or value not in options:
             raise self.fail(key, f"one of {list(options)}", value)

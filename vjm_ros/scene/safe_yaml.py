@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import re
+from typing import IO
 
 import yaml
-from yaml.nodes import MappingNode, ScalarNode, SequenceNode
+from yaml.error import Mark
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from vjm_ros.core.errors import SceneError
 from vjm_ros.scene.limits import FILE_KEY, MAX_MERGED_ENTRIES, MAX_NESTING
@@ -37,13 +39,13 @@ class SceneLoader(yaml.SafeLoader):
     bounded ``repr``.
     """
 
-    def __init__(self, stream):
+    def __init__(self, stream: str | bytes | IO[str] | IO[bytes]):
         super().__init__(stream)
         self._depth = 0
         self._merged = 0
         self._flattened: set[int] = set()
 
-    def compose_node(self, parent, index):
+    def compose_node(self, parent: Node | None, index: Node | int | None) -> Node:
         """Compose one node, counting the nesting depth."""
         if self._depth >= MAX_NESTING:
             raise _Refused(
@@ -57,7 +59,7 @@ class SceneLoader(yaml.SafeLoader):
         finally:
             self._depth -= 1
 
-    def compose_mapping_node(self, anchor):
+    def compose_mapping_node(self, anchor: str | None) -> MappingNode:
         """Compose a mapping and refuse a key written twice in it."""
         node = super().compose_mapping_node(anchor)
         seen = set()
@@ -72,7 +74,7 @@ class SceneLoader(yaml.SafeLoader):
                 seen.add(ident)
         return node
 
-    def flatten_mapping(self, node):
+    def flatten_mapping(self, node: MappingNode) -> None:
         """Expand merge keys (``<<``) once per mapping, within :data:`MAX_MERGED_ENTRIES` in all.
 
         The expansion is ours, not PyYAML's, so a scene means the same under every PyYAML 6.x
@@ -120,7 +122,7 @@ class SceneLoader(yaml.SafeLoader):
                     merged.append(pair)
         node.value = merged + own
 
-    def construct_object(self, node, deep=False):
+    def construct_object(self, node: Node, deep: bool = False) -> object:
         """Construct a value; PyYAML's own errors on malformed scalars become YAML errors."""
         try:
             return super().construct_object(node, deep=deep)
@@ -154,7 +156,7 @@ SceneLoader.add_implicit_resolver(
 
 
 
-def where(mark) -> str:
+def where(mark: Mark | None) -> str:
     """``line L, column C`` of a YAML mark."""
     if mark is None:
         return FILE_KEY

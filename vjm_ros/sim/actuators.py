@@ -29,6 +29,7 @@ matrix and a tick costs what it cost without these keys.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -62,7 +63,8 @@ class Actuation:
         True when some actuator has a lag or a delay (:meth:`tick` must run every tick).
     """
 
-    def __init__(self, model: Model, dynamics, dt: float, source: str = ""):
+    def __init__(self, model: Model, dynamics: Sequence[ActuatorDynamics], dt: float,
+                 source: str = ""):
         m = len(model.actuators)
         dynamics = tuple(dynamics) or tuple(ActuatorDynamics() for _ in range(m))
         if len(dynamics) != m:

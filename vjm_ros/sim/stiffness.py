@@ -16,6 +16,8 @@ judges the last good poses when a run fails (docs/design.md section 2).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from vjm_ros.core.constraints import (
@@ -28,6 +30,7 @@ from vjm_ros.core.errors import StiffnessError
 from vjm_ros.core.integrators import Integrator
 from vjm_ros.core.mechanism import Mechanism
 from vjm_ros.core.model import Model
+from vjm_ros.sim.settings import SimulationSettings
 
 THESIS_KP = 1e5
 """The thesis's closure stiffness (Tables 4.1-4.5, printed as "Ns/m"), N/m."""
@@ -76,7 +79,8 @@ def effective_masses(mobility: np.ndarray) -> np.ndarray:
         return np.where(diag > 0, 1.0 / np.maximum(diag, 1e-300), 0.0)
 
 
-def closure_method(model: Model, settings, scene_gains: dict, initial_mobility) -> (
+def closure_method(model: Model, settings: SimulationSettings, scene_gains: dict,
+                   initial_mobility: Callable[[], np.ndarray]) -> (
     PenaltyClosure | ExactClosure
 ):
     """The closure method and gains of a run: settings first, then the scene, then the thesis.
