@@ -26,7 +26,9 @@ OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS, OFF_VELOCIT
 
 
 @K._jit
-def velocity_map(jac, adot_qd, independent, dependent, singular_tolerance, s_map, s_bias):
+def velocity_map(jac: np.ndarray, adot_qd: np.ndarray, independent: np.ndarray,
+                 dependent: np.ndarray, singular_tolerance: float, s_map: np.ndarray,
+                 s_bias: np.ndarray) -> float:
     """``S`` and ``s`` of the closed chain at one state; the smallest singular value of ``A_v``.
 
     With ``A = [A_u A_v]`` (columns ``independent`` and ``dependent``): ``S = [I; -A_v^-1 A_u]``
@@ -82,9 +84,13 @@ def velocity_map(jac, adot_qd, independent, dependent, singular_tolerance, s_map
 
 
 @K._jit
-def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuated, udd, winv,
-                             limits, closure_tolerance, velocity_tolerance, singular_tolerance,
-                             preload, tau, p_out, w_out, z_out):
+def reduced_inverse_dynamics(mm: np.ndarray, bias: np.ndarray, jac: np.ndarray,
+                             crow: np.ndarray, independent: np.ndarray, dependent: np.ndarray,
+                             actuated: np.ndarray, udd: np.ndarray, winv: np.ndarray,
+                             limits: np.ndarray, closure_tolerance: float,
+                             velocity_tolerance: float, singular_tolerance: float,
+                             preload: float, tau: np.ndarray, p_out: np.ndarray,
+                             w_out: np.ndarray, z_out: np.ndarray) -> int:
     """Minimum-norm efforts plus preload for independent accelerations ``udd``; a status code.
 
     ``mm`` (n, n), ``bias`` (n,), ``jac`` (r, n), ``crow`` (r, 7) come from the kernel's
@@ -128,7 +134,7 @@ def reduced_inverse_dynamics(mm, bias, jac, crow, independent, dependent, actuat
 
 
 @K._jit
-def preload_direction(jac, actuated, z):
+def preload_direction(jac: np.ndarray, actuated: np.ndarray, z: np.ndarray) -> None:
     """Write into ``z`` (m,) the oriented direction of the efforts the closures balance.
 
     The efforts' part of the generalized cross product of the rows of ``N = [A^T B]``

@@ -8,12 +8,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from vjm_ros.core import layout
 from vjm_ros.core.constraints import ClosureTerms
 from vjm_ros.core.kinematics import Kinematics
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @dataclass
@@ -61,7 +65,7 @@ class Evaluation:
     energy: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
-def as_vector(x) -> np.ndarray:
+def as_vector(x: ArrayLike) -> np.ndarray:
     """A C-contiguous float64 vector (no copy when ``x`` already is one)."""
     return np.ascontiguousarray(x, dtype=np.float64)
 

@@ -15,9 +15,13 @@ numbers to round-off (not bit for bit: the sums run in another order), and
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from vjm_ros.core.small_linalg import lu_factor_range, lu_solve_range
 from vjm_ros.jit import jit as _jit
+
+if TYPE_CHECKING:
+    import numpy as np
 
 # columns of a row of the closure layout (:func:`vjm_ros.core.packing.closure_layout`)
 H_OTHER, H_HUB, H_HIT_OTHER, H_HIT_HUB, H_ORDER = range(5)
@@ -25,7 +29,9 @@ N_HUB_COLUMNS = 5
 
 
 @_jit(allocates=False)
-def hub_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec, blocks, lay):
+def hub_correction(lu: np.ndarray, piv: np.ndarray, jac: np.ndarray, c: np.ndarray,
+                   rcond: float, out: np.ndarray, minv_at: np.ndarray, g: np.ndarray,
+                   v: np.ndarray, vec: np.ndarray, blocks: np.ndarray, lay: np.ndarray) -> bool:
     """``M^-1 A^T lambda`` with ``A M^-1 A^T lambda = c``, by the hub solve (:func:`_hub_solve`),
     when it can prove ``A M^-1 A^T`` far from singular (its plain solution is then the
     minimum-norm one of :func:`vjm_ros.core.small_linalg.min_norm_correction`); False, with
@@ -94,7 +100,9 @@ def hub_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec, blocks, lay)
 
 
 @_jit(allocates=False)
-def hub_implicit_solve(mm, lu, piv, jac, wgt, h, x, col, blocks, lay):
+def hub_implicit_solve(mm: np.ndarray, lu: np.ndarray, piv: np.ndarray, jac: np.ndarray,
+                       wgt: np.ndarray, h: float, x: np.ndarray, col: np.ndarray,
+                       blocks: np.ndarray, lay: np.ndarray) -> int:
     """Solve ``(M + h A^T diag(wgt) A) dx = x`` in place in ``x`` for rows with a hub layout, in
     time linear in the number of chains.
 

@@ -39,6 +39,8 @@ closed chain along ``W``'s row, which keeps the closures to first order in the d
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from vjm_ros.core.layout import (
     F_FRICTION,
     F_FRICTION_SCALE,
@@ -55,6 +57,9 @@ from vjm_ros.core.small_linalg import (
 )
 from vjm_ros.jit import jit as _jit
 
+if TYPE_CHECKING:
+    import numpy as np
+
 MAX_SWEEPS = 100
 """Projected Gauss-Seidel sweeps at most per step."""
 
@@ -70,7 +75,7 @@ def _sticks(lflt, k):
 
 
 @_jit(allocates=False)
-def has_stop(lflt, k):
+def has_stop(lflt: np.ndarray, k: int) -> bool:
     """Whether joint ``k`` has a finite stop."""
     return lflt[k, F_RANGE_LO] > -1e300 or lflt[k, F_RANGE_HI] < 1e300
 
@@ -90,8 +95,12 @@ def _needed(lflt, k, q, qd, acc, h, implicit):
 
 
 @_jit(allocates=False)
-def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, lu, piv,
-                  minv_at, g, v, vec, rhs, corr, wcols, force, stop, blocks, touch):
+def joint_efforts(acc: np.ndarray, q: np.ndarray, qd: np.ndarray, h: float, implicit: bool,
+                  exact: bool, lflt: np.ndarray, par: np.ndarray, mm: np.ndarray,
+                  jac: np.ndarray, weights: np.ndarray, lu: np.ndarray, piv: np.ndarray,
+                  minv_at: np.ndarray, g: np.ndarray, v: np.ndarray, vec: np.ndarray,
+                  rhs: np.ndarray, corr: np.ndarray, wcols: np.ndarray, force: np.ndarray,
+                  stop: np.ndarray, blocks: np.ndarray, touch: np.ndarray) -> int:
     """Choose the friction and stop efforts of a step and add their effect to ``acc`` in place.
 
     Parameters
@@ -205,7 +214,8 @@ def joint_efforts(acc, q, qd, h, implicit, exact, lflt, par, mm, jac, weights, l
 
 
 @_jit(allocates=False)
-def stop_impacts(q, qd, lflt, wcols, start):
+def stop_impacts(q: np.ndarray, qd: np.ndarray, lflt: np.ndarray, wcols: np.ndarray,
+                 start: np.ndarray) -> float:
     """Set every coordinate carried past a stop over the step back on it, moving the others by
     ``W``'s row so that the closures hold to first order, and reverse its rate to ``-e qd_k`` by
     an impulse through ``W`` (the rows :func:`joint_efforts` left in ``wcols``); ``e = 0`` for

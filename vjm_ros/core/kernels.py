@@ -21,6 +21,8 @@ The entry points return a status: 0 on success, 1 when a matrix was exactly sing
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from vjm_ros.core.hub_linalg import hub_correction, hub_implicit_solve
@@ -70,6 +72,9 @@ from vjm_ros.jit import HAVE_NUMBA  # noqa: F401  (HAVE_NUMBA: part of this modu
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
 # operations of step()
 EXPLICIT_EULER = 0
 SEMI_IMPLICIT_EULER = 1
@@ -106,7 +111,7 @@ signature (seconds each on a cold cache)."""
 
 
 def evaluate(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
-             qdd: np.ndarray, kernel=None) -> int:
+             qdd: np.ndarray, kernel: Callable[..., int] | None = None) -> int:
     """Every term at ``(q, qd)`` into ``data`` and the accelerations with efforts ``tau``.
 
     Parameters
@@ -131,7 +136,8 @@ def evaluate(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, tau:
                             qdd, data.spare, NO_KNOWN, NO_ROW)
 
 
-def residual(model: PackedModel, data: Data, q: np.ndarray, kernel=None) -> int:
+def residual(model: PackedModel, data: Data, q: np.ndarray,
+             kernel: Callable[..., int] | None = None) -> int:
     """Closure residuals at ``q`` with zero rates, without the dynamics or the Jacobian, into
     ``data.kin`` and ``data.crow`` (columns :data:`R_RES`, :data:`R_DX` .. :data:`R_DZ`)."""
     return (kernel or step)(RESIDUAL, q, q, q, 0.0, ONE_STEP, 0.0, as_arguments(model), as_arguments(data),
@@ -139,7 +145,8 @@ def residual(model: PackedModel, data: Data, q: np.ndarray, kernel=None) -> int:
 
 
 def implicit_velocity(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray,
-                      tau: np.ndarray, h: float, v: np.ndarray, kernel=None) -> int:
+                      tau: np.ndarray, h: float, v: np.ndarray,
+                      kernel: Callable[..., int] | None = None) -> int:
     """``v``, the velocity after a step of length ``h`` (s) implicit in the penalty forces
     (``qd + h qdd`` for exact closures); arguments and status as :func:`evaluate`."""
     return (kernel or step)(IMPLICIT_VELOCITY, q, qd, tau, h, ONE_STEP, 0.0, as_arguments(model),
@@ -148,7 +155,7 @@ def implicit_velocity(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndar
 
 def advance(model: PackedModel, data: Data, method: int, q: np.ndarray, qd: np.ndarray,
             tau: np.ndarray, h: float, steps: int, q_out: np.ndarray, qd_out: np.ndarray,
-            kernel=None) -> int:
+            kernel: Callable[..., int] | None = None) -> int:
     """``steps`` steps of length ``h`` (s) of a fixed-step method from ``(q, qd)``, efforts
     held, into ``(q_out, qd_out)``.
 
@@ -161,7 +168,8 @@ def advance(model: PackedModel, data: Data, method: int, q: np.ndarray, qd: np.n
 
 
 def project(model: PackedModel, data: Data, q: np.ndarray, qd: np.ndarray, steps: int,
-            tol: float, q_out: np.ndarray, qd_out: np.ndarray, kernel=None) -> int:
+            tol: float, q_out: np.ndarray, qd_out: np.ndarray,
+            kernel: Callable[..., int] | None = None) -> int:
     """``(q, qd)`` projected onto the closures, into ``(q_out, qd_out)``: at most ``steps``
     Gauss-Newton steps in the metric of ``M`` until ``max |C| <= tol`` (m or rad), then one
     velocity projection (``rcond = 1e-10``), as
@@ -181,7 +189,9 @@ workspace has a hub layout (:meth:`vjm_ros.core.mechanism.Mechanism` picks). Giv
 
 
 @_jit(allocates=False)
-def step(op, q0, qd0, tau, h, steps, tol, model, data, out_a, out_b, known, row):
+def step(op: int, q0: np.ndarray, qd0: np.ndarray, tau: np.ndarray, h: float, steps: int,
+         tol: float, model: tuple, data: tuple, out_a: np.ndarray, out_b: np.ndarray,
+         known: np.ndarray, row: int) -> int:
     """The one compiled kernel behind the entry points above: ``op`` says what it computes.
 
     numba compiles this one function (with its copies :data:`step_with_hub`, :data:`step_inline`)

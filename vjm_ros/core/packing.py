@@ -7,12 +7,19 @@ when the method is replaced).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from vjm_ros.core import hub_linalg as H
 from vjm_ros.core import layout
 from vjm_ros.core.constraints import ExactClosure, PenaltyClosure
 from vjm_ros.core.model import ANGLE, HINGE, SLIDER, Model
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    from vjm_ros.core.model import Load
 
 _KIND_CODE = {HINGE: layout.HINGE, SLIDER: layout.SLIDER, ANGLE: layout.ANGLE}
 
@@ -130,7 +137,7 @@ def pack_method(
     return gains, par
 
 
-def add_loads(lflt: np.ndarray, loads) -> None:
+def add_loads(lflt: np.ndarray, loads: Iterable[Load]) -> None:
     """Add ``loads`` (:class:`~vjm_ros.core.model.Load`) to the load columns of ``lflt`` in
     place, reduced per link (:mod:`vjm_ros.core.layout`)."""
     for load in loads:

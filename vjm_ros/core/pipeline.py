@@ -39,6 +39,7 @@ a block on, a tick costs ``4 substeps`` evaluations, the observation included.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,12 +50,25 @@ from vjm_ros.core.terms import point_motion
 from vjm_ros.jit import jit as _jit
 from vjm_ros.jit import variant as _variant
 
+if TYPE_CHECKING:
+    from collections.abc import Sized
+    from typing import Protocol
+
+    class ModelSizes(Protocol):
+        """What the functions below read of a :class:`vjm_ros.core.model.Model` (this layer
+        does not import it)."""
+
+        n: int
+        points: Sized
+        closures: Sized
+        stop_joints: Sized
+
 OBSERVABLES = ("q", "qd", "qdd", "theta", "points", "force", "error", "cpoints", "energy",
                "power", "dissipation", "loss", "segments")
 """Names of the output arrays, in the order :func:`observe` takes them."""
 
 
-def observable_shapes(model) -> tuple[tuple[int, ...], ...]:
+def observable_shapes(model: ModelSizes) -> tuple[tuple[int, ...], ...]:
     """Shape of one row of each output array of ``model``, a
     :class:`~vjm_ros.core.model.Model` (:data:`OBSERVABLES` order)."""
     n, p, k = model.n, len(model.points), len(model.closures)
@@ -62,7 +76,7 @@ def observable_shapes(model) -> tuple[tuple[int, ...], ...]:
     return ((n,), (n,), (n,), (n,), (p, 2), (f, 3), (k,), (f, 2), (4,), (), (), (), (n, 2, 2))
 
 
-def new_outputs(rows: int, model) -> tuple[np.ndarray, ...]:
+def new_outputs(rows: int, model: ModelSizes) -> tuple[np.ndarray, ...]:
     """Zeroed output arrays of ``model`` (a :class:`~vjm_ros.core.model.Model`) for ``rows``
     ticks."""
     return tuple(np.zeros((rows,) + shape) for shape in observable_shapes(model))
@@ -87,7 +101,9 @@ _tick_step = K.step_inline
 
 
 @_jit(allocates=False, inline="always")
-def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated):
+def observe(row: int, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, model: tuple, data: tuple,
+            lengths: np.ndarray, plink: np.ndarray, plocal: np.ndarray, out: tuple,
+            evaluated: bool) -> int:
     """Every observable at ``(q, qd)`` with efforts ``tau``, into row ``row`` of ``out``.
 
     Parameters
@@ -190,7 +206,8 @@ def observe(row, q, qd, tau, model, data, lengths, plink, plocal, out, evaluated
 
 
 @_jit(allocates=False, inline="always")
-def observe_stops(row, model, data, first, o_force, o_cpoints):
+def observe_stops(row: int, model: tuple, data: tuple, first: int, o_force: np.ndarray,
+                  o_cpoints: np.ndarray) -> None:
     """The force of every joint's stop, from row ``first`` of ``o_force[row]`` and
     ``o_cpoints[row]`` on, in joint order (module docstring)."""
     lint, lflt = model[0], model[1]
@@ -219,8 +236,10 @@ def tick_state(n: int) -> tuple[np.ndarray, ...]:
 
 
 @_jit(allocates=False)
-def advance_ticks(method, q0, qd0, tau, h, substeps, ticks, project, limit, model, data,
-                  lengths, plink, plocal, out, state):
+def advance_ticks(method: int, q0: np.ndarray, qd0: np.ndarray, tau: np.ndarray, h: float,
+                  substeps: int, ticks: int, project: bool, limit: float, model: tuple,
+                  data: tuple, lengths: np.ndarray, plink: np.ndarray, plocal: np.ndarray,
+                  out: tuple, state: tuple) -> tuple[int, int]:
     """``ticks`` control ticks of ``substeps`` steps of ``method``, each observed.
 
     Parameters
@@ -297,7 +316,8 @@ observe_with_hub = _variant(observe, "observe_with_hub", _step=K.step_with_hub)
 
 
 @_jit(allocates=False)
-def observe_state(q, qd, tau, model, data, lengths, plink, plocal, out):
+def observe_state(q: np.ndarray, qd: np.ndarray, tau: np.ndarray, model: tuple, data: tuple,
+                  lengths: np.ndarray, plink: np.ndarray, plocal: np.ndarray, out: tuple) -> int:
     """Every observable at ``(q, qd)`` with efforts ``tau``, evaluated there, into row 0 of
     ``out``: one sample outside a block (:meth:`vjm_ros.sim.simulator.Simulator.sample`), the
     same numbers as :func:`advance_ticks` observes. Arguments as :func:`observe`; returns 0, or

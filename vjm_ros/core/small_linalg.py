@@ -6,12 +6,16 @@ calls (matrices here are a few rows: a call into LAPACK would cost more than the
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from vjm_ros.jit import jit as _jit
 
+if TYPE_CHECKING:
+    import numpy as np
+
 
 @_jit(allocates=False)
-def lu_factor_blocks(a, piv, blocks):
+def lu_factor_blocks(a: np.ndarray, piv: np.ndarray, blocks: np.ndarray) -> int:
     """LU factorization with partial pivoting, in place (as LAPACK ``dgetrf``), of a
     block-diagonal ``a`` (blocks ``blocks[b] .. blocks[b + 1] - 1``), one block at a time.
 
@@ -32,7 +36,7 @@ def lu_factor_blocks(a, piv, blocks):
 
 
 @_jit(allocates=False)
-def lu_factor_range(a, piv, lo, hi):
+def lu_factor_range(a: np.ndarray, piv: np.ndarray, lo: int, hi: int) -> int:
     """:func:`lu_factor_blocks` of the one diagonal block ``lo .. hi - 1`` of ``a``."""
     status = 0
     for k in range(lo, hi):
@@ -64,7 +68,7 @@ def lu_factor_range(a, piv, lo, hi):
 
 
 @_jit(allocates=False)
-def lu_solve_range(a, piv, b, lo, hi):
+def lu_solve_range(a: np.ndarray, piv: np.ndarray, b: np.ndarray, lo: int, hi: int) -> None:
     """Solve the diagonal block ``lo .. hi - 1`` of :func:`lu_factor_blocks`'s output in place
     in ``b[lo:hi]``."""
     for k in range(lo, hi):
@@ -86,14 +90,17 @@ def lu_solve_range(a, piv, b, lo, hi):
 
 
 @_jit(allocates=False)
-def lu_solve_blocks(a, piv, b, blocks):
+def lu_solve_blocks(a: np.ndarray, piv: np.ndarray, b: np.ndarray, blocks: np.ndarray) -> None:
     """Solve ``A x = b`` in place in ``b`` (shape (n,)) from :func:`lu_factor_blocks`'s output."""
     for k in range(blocks.shape[0] - 1):
         lu_solve_range(a, piv, b, blocks[k], blocks[k + 1])
 
 
 @_jit(allocates=False)
-def min_norm_correction(lu, piv, jac, c, rcond, out, minv_at, g, v, vec, blocks, touch):
+def min_norm_correction(lu: np.ndarray, piv: np.ndarray, jac: np.ndarray, c: np.ndarray,
+                        rcond: float, out: np.ndarray, minv_at: np.ndarray, g: np.ndarray,
+                        v: np.ndarray, vec: np.ndarray, blocks: np.ndarray,
+                        touch: np.ndarray) -> None:
     """``M^-1 A^T lambda`` with ``lambda`` the minimum-norm solution of ``A M^-1 A^T lambda = c``.
 
     When ``A M^-1 A^T`` is provably far from singular (no eigenvalue can fall below the cut

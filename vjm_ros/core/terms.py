@@ -21,6 +21,7 @@ Layouts of the arrays read and written: :mod:`vjm_ros.core.layout`.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from vjm_ros.core.layout import (
     C_VX,
@@ -80,9 +81,13 @@ from vjm_ros.core.layout import (
 )
 from vjm_ros.jit import jit as _jit
 
+if TYPE_CHECKING:
+    import numpy as np
+
 
 @_jit(allocates=False)
-def point_motion(kin, link, s, w):
+def point_motion(kin: np.ndarray, link: int, s: float, w: float
+                 ) -> tuple[float, float, float, float, float, float]:
     """Position, velocity and bias acceleration of the point ``(s, w)`` of ``link``.
 
     Returns
@@ -109,7 +114,8 @@ def point_motion(kin, link, s, w):
 
 
 @_jit(allocates=False)
-def add_point_jacobian(jac, row, cx, cy, link, px, py, lint, kin):
+def add_point_jacobian(jac: np.ndarray, row: int, cx: float, cy: float, link: int, px: float,
+                       py: float, lint: np.ndarray, kin: np.ndarray) -> None:
     """Add ``cx dPx/dq + cy dPy/dq`` of the point ``P = (px, py)`` of ``link`` to ``jac[row]``.
 
     Nothing is added for the ground (``link = -1``).
@@ -127,7 +133,8 @@ def add_point_jacobian(jac, row, cx, cy, link, px, py, lint, kin):
 
 
 @_jit(allocates=False)
-def add_angle_jacobian(jac, row, sign, link, lint):
+def add_angle_jacobian(jac: np.ndarray, row: int, sign: float, link: int,
+                       lint: np.ndarray) -> None:
     """Add ``sign * d theta_link / dq`` to ``jac[row]`` (nothing for the ground)."""
     if link < 0:
         return
@@ -146,7 +153,8 @@ def _com_column(lint, kin, k, cx, cy):
 
 
 @_jit(allocates=False)
-def plant_terms(qd, lint, lflt, kin, mm, bias):
+def plant_terms(qd: np.ndarray, lint: np.ndarray, lflt: np.ndarray, kin: np.ndarray,
+                mm: np.ndarray, bias: np.ndarray) -> None:
     """Add the joints' armature to ``M``'s diagonal, their viscous damping (``b += c qd``) and
     smooth friction (``b += mu tanh(qd / v_s)``) to ``b``, and the generalized forces of the links' loads to ``b`` (``b -= Q``).
 
@@ -178,7 +186,7 @@ def plant_terms(qd, lint, lflt, kin, mm, bias):
 
 
 @_jit(allocates=False)
-def load_potential(lflt, kin):
+def load_potential(lflt: np.ndarray, kin: np.ndarray) -> float:
     """Potential energy of the links' loads, ``-sum(F . P + Tz theta)``, J."""
     potential = 0.0
     for i in range(lflt.shape[0]):
@@ -193,8 +201,10 @@ def load_potential(lflt, kin):
 
 
 @_jit(allocates=False)
-def terms(q, qd, lint, lflt, cint, cflt, par, with_dynamics, kin, mm, bias, cm, crow, jac,
-          points):
+def terms(q: np.ndarray, qd: np.ndarray, lint: np.ndarray, lflt: np.ndarray, cint: np.ndarray,
+          cflt: np.ndarray, par: np.ndarray, with_dynamics: bool, kin: np.ndarray,
+          mm: np.ndarray, bias: np.ndarray, cm: np.ndarray, crow: np.ndarray, jac: np.ndarray,
+          points: np.ndarray) -> None:
     """Kinematics, dynamics and closure rows at ``(q, qd)`` into the output buffers.
 
     With ``with_dynamics`` False only ``kin`` and the residual, rate and direction columns of

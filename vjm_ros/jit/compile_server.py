@@ -39,8 +39,12 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vjm_ros.jit import deferred, numba_internals
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterator
 
 try:
     import fcntl
@@ -155,7 +159,7 @@ class CompileLock:
 
 
 @contextlib.contextmanager
-def holding_lock(log=None):
+def holding_lock(log: Callable[[str], object] | None = None) -> Iterator[None]:
     """Hold the compile lock for the ``with`` block, waiting first for a compile server that
     holds it (said through ``log``, a callable taking a line of text). For a process that
     compiles in the foreground (:mod:`vjm_ros.app.precompile`)."""

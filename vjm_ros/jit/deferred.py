@@ -24,9 +24,13 @@ import sys
 import threading
 import types
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vjm_ros.jit import numba_internals
 from vjm_ros.jit.sources import PACKAGE, sources_stamp
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def _load_blas_wrappers() -> bool:
@@ -90,7 +94,7 @@ class Deferred:
     function, as a dispatcher's is.
     """
 
-    def __init__(self, fn, options: dict):
+    def __init__(self, fn: Callable[..., object], options: dict):
         self.py_func = fn
         self.vjm_options = options
         self.dispatcher = None
@@ -114,12 +118,12 @@ _ACTIVE = False
 _ACTIVATING = threading.RLock()
 
 
-def is_compiled(obj) -> bool:
+def is_compiled(obj: object) -> bool:
     """Whether ``obj`` is a compiled function: a numba dispatcher or a :class:`Deferred`."""
     return isinstance(obj, Deferred) or numba_internals.is_dispatcher(obj)
 
 
-def compiled(obj):
+def compiled(obj: Callable[..., object]) -> Callable[..., object]:
     """The dispatcher of a :class:`Deferred` (importing numba now if need be), ``obj`` itself
     for anything else."""
     if not isinstance(obj, Deferred):
@@ -205,7 +209,8 @@ def _new(fn, options: dict):
         return deferred
 
 
-def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
+def jit(fn: Callable[..., object] | None = None, *, allocates: bool = True,
+        inline: str = "never") -> Callable[..., object]:
     """Compile ``fn`` with numba (no Python objects, cached on disk), or return it unchanged.
 
     Before numba is imported (:func:`activate`) the result is a :class:`Deferred` that stands for
@@ -230,7 +235,8 @@ def jit(fn=None, *, allocates: bool = True, inline: str = "never"):
     return _new(fn, {"allocates": allocates, "inline": inline})
 
 
-def variant(compiled_fn, name: str, *, inline: str | None = None, **constants):
+def variant(compiled_fn: Callable[..., object], name: str, *, inline: str | None = None,
+            **constants: object) -> Callable[..., object]:
     """A second compiled copy of ``compiled_fn`` (made by :func:`jit`) that reads ``constants``
     in place of its module's globals of those names, under the name ``name``; ``inline``, when
     given, replaces its ``inline`` option (``"always"``: a copy that numba inlines into each

@@ -24,6 +24,10 @@ import functools
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numba.core.dispatcher import Dispatcher
 
 PRIVATE_NAMES = (
     "numba.core.caching.UserProvidedCacheLocator",
@@ -104,7 +108,7 @@ def _load_without_registries(cache, sig, target_context):
         return cache._load_overload(sig, target_context)
 
 
-def loads_lazily(dispatcher) -> None:
+def loads_lazily(dispatcher: Dispatcher) -> None:
     """Make ``dispatcher``'s cache load with :func:`_load_without_registries` (nothing to do
     where numba compiles nothing, ``NUMBA_DISABLE_JIT``)."""
     cache = getattr(dispatcher, "_cache", None)
@@ -113,19 +117,19 @@ def loads_lazily(dispatcher) -> None:
 
 
 # ---------------------------------------------------------------------------- dispatchers
-def is_dispatcher(obj) -> bool:
+def is_dispatcher(obj: object) -> bool:
     """Whether ``obj`` is a numba dispatcher (False while numba is not imported)."""
     dispatcher = sys.modules.get("numba.core.dispatcher")
     return dispatcher is not None and isinstance(obj, dispatcher.Dispatcher)
 
 
-def argument_types(dispatcher, args: tuple) -> tuple:
+def argument_types(dispatcher: Dispatcher, args: tuple) -> tuple:
     """numba's argument types for a call of ``dispatcher`` with ``args`` (what the dispatcher
     itself computes)."""
     return tuple(dispatcher.typeof_pyval(a) for a in args)
 
 
-def load_cached(dispatcher, args: tuple) -> bool:
+def load_cached(dispatcher: Dispatcher, args: tuple) -> bool:
     """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
     this process already, or loaded now from numba's cache (as numba's own first call does)."""
     sig = argument_types(dispatcher, args)

@@ -34,10 +34,14 @@ import os
 import threading
 import time
 import types
+from typing import TYPE_CHECKING
 
 from vjm_ros.jit import deferred as jit
 from vjm_ros.jit import numba_internals
 from vjm_ros.jit.compile_server import server
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 ENVIRONMENT = "VJM_TIERED"
 """Environment variable: ``0`` compiles in the calling process (no plain-Python tier)."""
@@ -97,7 +101,7 @@ def _plain_globals(names: dict) -> dict:
     return copy
 
 
-def interpreted(function):
+def interpreted(function: Callable[..., object]) -> Callable[..., object]:
     """The plain-Python copy of a compiled function: its source, with every compiled function it
     reaches (through its module's globals, a module, or a copy made by
     :func:`vjm_ros.jit.variant`) replaced by that function's plain copy. A function that is
@@ -118,7 +122,7 @@ def interpreted(function):
 
 
 # ---------------------------------------------------------------------------- numba's cache
-def load_cached(dispatcher, args: tuple) -> bool:
+def load_cached(dispatcher: Callable[..., object], args: tuple) -> bool:
     """Whether ``dispatcher`` can run ``args`` without compiling: compiled for their types in
     this process already, or loaded now from numba's cache (as numba's own first call does)."""
     return numba_internals.load_cached(jit.compiled(dispatcher), args)
@@ -167,7 +171,7 @@ class Tiered:
         imported now if it was not)."""
         self.compiled = jit.compiled(self.compiled)
 
-    def dispatcher(self):
+    def dispatcher(self) -> Callable[..., object]:
         """The compiled function itself (numba imported now if it was not), not called: what
         runs once :attr:`ready`."""
         self._resolve()
@@ -194,7 +198,7 @@ class Tiered:
         as plain Python before (``plain_calls`` spent)."""
         self._plain_left = 0
 
-    def prepare(self, *args) -> None:
+    def prepare(self, *args: object) -> None:
         """Load the compiled code for calls with arguments like ``args``, or have it compiled in
         the background, without calling the function."""
         self._plain_left = 0

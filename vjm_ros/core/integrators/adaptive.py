@@ -10,10 +10,14 @@ boundary: a fresh effort is never mixed into a step already begun.
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from vjm_ros.core.integrators.base import Integrator
+
+if TYPE_CHECKING:
+    from vjm_ros.core.integrators.base import System
 
 
 class AdaptiveIntegrator(Integrator):
@@ -43,7 +47,8 @@ class AdaptiveIntegrator(Integrator):
         self._tau = None
         self._y_end = None
 
-    def advance(self, system, t, q, qd, tau, dt, substeps=1):
+    def advance(self, system: System, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+                dt: float, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         n = len(q)
         y = np.concatenate((q, qd))
         t_end = t + dt

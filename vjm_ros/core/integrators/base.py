@@ -23,8 +23,23 @@ stability bounds are computed from it.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from typing import Protocol
+
+    class System(Protocol):
+        """What the integrators call of a :class:`~vjm_ros.core.mechanism.Mechanism` (a layer
+        above this one)."""
+
+        def accelerations(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndarray:
+            ...
+
+        def advance_fixed(self, method: int, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+                          h: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+            ...
 
 STABILITY_TOL = 1e-12
 """Spectral radius above ``1 + STABILITY_TOL`` counts as growth (round-off allowance)."""
@@ -53,7 +68,7 @@ class Integrator(ABC):
     @abstractmethod
     def advance(
         self,
-        system,
+        system: System,
         t: float,
         q: np.ndarray,
         qd: np.ndarray,
@@ -97,7 +112,8 @@ class FixedStepIntegrator(Integrator):
 
     kernel_method: int = -1
 
-    def advance(self, system, t, q, qd, tau, dt, substeps=1):
+    def advance(self, system: System, t: float, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+                dt: float, substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """``substeps`` steps of ``h = dt / substeps`` in one compiled call on ``system`` (a
         :class:`~vjm_ros.core.mechanism.Mechanism`); returns ``(q, qd)``."""
         return system.advance_fixed(self.kernel_method, q, qd, tau, dt / substeps, substeps)

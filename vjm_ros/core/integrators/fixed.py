@@ -42,7 +42,7 @@ class ExplicitEuler(FixedStepIntegrator):
     order = 1
     kernel_method = K.EXPLICIT_EULER
 
-    def step_matrix(self, stiffness, damping, h):
+    def step_matrix(self, stiffness: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
         return _polynomial_of((1.0, 1.0), h * first_order(stiffness, damping))
 
 
@@ -53,7 +53,7 @@ class SemiImplicitEuler(FixedStepIntegrator):
     order = 1
     kernel_method = K.SEMI_IMPLICIT_EULER
 
-    def step_matrix(self, stiffness, damping, h):
+    def step_matrix(self, stiffness: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
         # v+ = -h K x + (I - h D) v, x+ = x + h v+
         k, d = np.asarray(stiffness, dtype=float), np.asarray(damping, dtype=float)
         eye = np.broadcast_to(np.eye(k.shape[-1]), k.shape)
@@ -68,7 +68,7 @@ class RK4(FixedStepIntegrator):
     order = 4
     kernel_method = K.RK4
 
-    def step_matrix(self, stiffness, damping, h):
+    def step_matrix(self, stiffness: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
         taylor = (1.0, 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0)
         return _polynomial_of(taylor, h * first_order(stiffness, damping))
 
@@ -88,7 +88,7 @@ class ImplicitPenaltyEuler(FixedStepIntegrator):
     def stability_bounds(self, zeta: np.ndarray) -> np.ndarray:
         return np.full(np.size(zeta), np.inf)
 
-    def step_matrix(self, stiffness, damping, h):
+    def step_matrix(self, stiffness: np.ndarray, damping: np.ndarray, h: float) -> np.ndarray:
         # every force of x'' = -K x - D x' is a penalty force, taken at the end of the step:
         # (I + h D + h^2 K) v+ = v - h K x, x+ = x + h v+
         k, d = np.asarray(stiffness, dtype=float), np.asarray(damping, dtype=float)
