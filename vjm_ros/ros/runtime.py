@@ -20,17 +20,18 @@ from typing import TYPE_CHECKING
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.exceptions import InvalidHandle
-from rclpy.executors import Executor, ExternalShutdownException
-from rclpy.impl.rcutils_logger import RcutilsLogger
-from rclpy.subscription import Subscription
+from rclpy.executors import ExternalShutdownException
 
 from vjm_ros.logs.signals import StopSignals
 from vjm_ros.realtime.gate import Gate
 
 if TYPE_CHECKING:
     from rclpy.callback_groups import Entity
+    from rclpy.executors import Executor
+    from rclpy.impl.rcutils_logger import RcutilsLogger
     from rclpy.node import Node
     from rclpy.publisher import Publisher
+    from rclpy.subscription import Subscription
 
     from vjm_ros.realtime.loop import TickLoop
 
