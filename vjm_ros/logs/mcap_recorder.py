@@ -178,11 +178,7 @@ class McapRecorder(Recorder):
             raise
         self._chunk_start_ns: int | None = None
         self._chunk_wall = time.monotonic()
-        self._prepare_encoders()
-
-    def _prepare_encoders(self) -> None:
-        """The encoder of the per-tick messages (and markers), for blocks of ticks."""
-        self._block_encoder = mcap_block.BlockEncoder(
+        self._block_encoder = mcap_block.BlockEncoder(  # the per-tick messages and markers
             self.model, self._channels, self.topics, self.marker_every, messages.FORCE_SCALE,
             self.measured)
 
@@ -231,13 +227,13 @@ class McapRecorder(Recorder):
         return channels
 
     # ------------------------------------------------------------------ writing
-    def _put(self, channel: int, data: bytes, ns: int) -> None:
-        self._writer.add_message(channel, ns, data, ns, self.samples & 0xFFFFFFFF)
+    def _event(self, text: str, ns: int) -> None:
+        """Log ``text`` on ``/<node>/events`` at ``ns``."""
+        channel = self._channels[self.topics.events]
+        self._writer.add_message(channel, ns, cdr.encode_string(text), ns,
+                                 self.samples & 0xFFFFFFFF)
         self.bag.note(self._records[channel], ns)
         self.message_count += 1
-
-    def _event(self, text: str, ns: int) -> None:
-        self._put(self._channels[self.topics.events], cdr.encode_string(text), ns)
 
     @atomic
     def write_block(self, block: SampleBlock) -> None:
