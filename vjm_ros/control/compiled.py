@@ -20,12 +20,13 @@ from vjm_ros.core import kernels as K
 from vjm_ros.core import layout
 from vjm_ros.core.constraints import ExactClosure
 from vjm_ros.core.model import Model
+from vjm_ros.jit import jit
 
 OK, OFF_CLOSURES, SINGULAR, UNDERACTUATED, NONFINITE, BEYOND_LIMITS, OFF_VELOCITIES = range(7)
 """Status codes of :func:`reduced_inverse_dynamics`."""
 
 
-@K._jit
+@jit
 def velocity_map(jac: np.ndarray, adot_qd: np.ndarray, independent: np.ndarray,
                  dependent: np.ndarray, singular_tolerance: float, s_map: np.ndarray,
                  s_bias: np.ndarray) -> float:
@@ -83,7 +84,7 @@ def velocity_map(jac: np.ndarray, adot_qd: np.ndarray, independent: np.ndarray,
     return smallest
 
 
-@K._jit
+@jit
 def reduced_inverse_dynamics(mm: np.ndarray, bias: np.ndarray, jac: np.ndarray,
                              crow: np.ndarray, independent: np.ndarray, dependent: np.ndarray,
                              actuated: np.ndarray, udd: np.ndarray, winv: np.ndarray,
@@ -133,7 +134,7 @@ def reduced_inverse_dynamics(mm: np.ndarray, bias: np.ndarray, jac: np.ndarray,
     return OK
 
 
-@K._jit
+@jit
 def preload_direction(jac: np.ndarray, actuated: np.ndarray, z: np.ndarray) -> None:
     """Write into ``z`` (m,) the oriented direction of the efforts the closures balance.
 
@@ -205,7 +206,7 @@ class CompiledInverseDynamics:
                                         self.tau, self.p, self.w, self.direction)
 
 
-@K._jit
+@jit
 def _finite(q, qd, udd):
     for x in (q, qd):
         for i in range(x.shape[0]):

@@ -224,7 +224,7 @@ class SimNode(Node):
             f"{', paused' if self.config.start_paused else ''}; actuators "
             f"{sim.model.actuator_names} on {self.get_fully_qualified_name()}/effort_commands"
         )
-        if getattr(sim.mechanism, "compiling", False):
+        if sim.mechanism.compiling:
             self.get_logger().warning(COMPILING_NOTE)
 
     # ------------------------------------------------------------------ set-up
