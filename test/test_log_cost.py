@@ -39,8 +39,25 @@ def test_fresh_runs_report_wall_time_and_elapsed_per_configuration(tmp_path):
     assert set(r["wall_ms"]) == set(r["elapsed_ms"]) == set(log_cost.CONFIGS)
     assert r["ratio"]["physics"] == r["elapsed_ratio"]["physics"] == 1.0
     assert all(r["elapsed_ms"][c] > 0 and r["wall_ms"][c] > 0 for c in log_cost.CONFIGS)
+    floor = r["floor"]
+    assert floor["wall_ms"] > 0 and floor["ratio"] == pytest.approx(floor["wall_ms"] / r["wall_ms"]["physics"])
     text = "\n".join(log_cost.render_fresh(r))
     assert f"| `--out --mcap --rrd` | {r['wall_ms']['all']:.0f} |" in text
+    assert f"takes {floor['wall_ms']:.0f} ms" in text
+
+
+def test_busy_core_runs_at_the_logs_priority_and_is_reaped():
+    """The floor's neighbour: a process at the log threads' niceness while the context lasts,
+    gone after it (no process left behind by the study)."""
+    import os
+
+    from vjm_ros.logs.background import NICENESS
+
+    with log_cost.busy_core() as spinner:
+        assert spinner.poll() is None
+        own = os.getpriority(os.PRIO_PROCESS, 0)
+        assert os.getpriority(os.PRIO_PROCESS, spinner.pid) == min(own + NICENESS, 19)
+    assert spinner.returncode is not None
 
 
 def test_preloaded_libraries_are_imported_before_the_run_starts():
