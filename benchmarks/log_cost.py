@@ -288,8 +288,9 @@ def render_fresh(r: dict) -> list[str]:
         f = r["floor"]
         lines += [f"- **The machine's floor**: the run without outputs, with the second core "
                   f"kept busy by another process at the logs' priority, takes {f['wall_ms']:.0f} "
-                  f"ms, {f['ratio']:.2f}x the run without outputs on a free core; the run with "
-                  f"all three logs takes {f['all_ratio']:.2f}x that."]
+                  f"ms, {f['ratio']:.2f}x the run without outputs on a free core (what the two "
+                  "series of the physics alone differ by beyond that share is this machine's "
+                  f"noise); the run with all three logs takes {f['all_ratio']:.2f}x that."]
     lines += [""]
     return lines
 
