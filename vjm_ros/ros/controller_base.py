@@ -7,11 +7,15 @@ A controller commands one simulator: it publishes ``<simulator>/effort_commands`
 
 from __future__ import annotations
 
-from rclpy.context import Context
+from typing import TYPE_CHECKING
+
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
 
 
 class ControllerNode(Node):

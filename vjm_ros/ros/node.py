@@ -66,6 +66,7 @@ import math
 import sys
 import time
 import traceback
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rclpy
@@ -77,10 +78,8 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
@@ -123,6 +122,10 @@ from vjm_ros.scene.description import assembled_scene_yaml
 from vjm_ros.scene.loader import Scene, load_scene
 from vjm_ros.sim.samples import Sample
 from vjm_ros.sim.simulator import Simulator
+
+if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
 
 NODE_NAME = "vjm_sim_node"
 EXIT_OK, EXIT_ERROR, EXIT_CONFIG, EXIT_DIVERGED = 0, 1, 2, 3
