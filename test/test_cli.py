@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+import resource
 import subprocess
 import sys
 
@@ -18,6 +19,7 @@ SUMMARY_KEYS = {
     "substeps",
     "sim_time",
     "wall_time",
+    "cpu_time",
     "steps",
     "realtime_factor",
     "max_closure_error",
@@ -84,10 +86,18 @@ def test_closed_output_pipe_ends_quietly():
 @pytest.mark.parametrize("scene", ["six_bar", "rrr_platform"])
 def test_run_writes_contract(tmp_path, scene):
     """trajectory.csv columns, summary.json keys and the --json last line."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     out = vjm("run", scene, "--duration", "0.05", "--out", str(tmp_path), "--json")
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     assert out.returncode == 0, out.stderr
     last = json.loads(out.stdout.strip().splitlines()[-1])
     assert SUMMARY_KEYS <= set(last)
+    # cpu_time spans the run, not the process: 50 ticks take ms, the interpreter's start-up and
+    # imports some 0.5-1 s of CPU; and no more CPU time than the machine's cores give in the
+    # run's wall time (5 ms for the two clocks being read one after the other)
+    process_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    assert 0.0 <= last["cpu_time"] < 0.1 * process_cpu
+    assert last["cpu_time"] <= last["wall_time"] * os.cpu_count() + 5e-3
     assert last["scene"] == scene and last["finite"] is True
     assert last["steps"] == 50 and abs(last["sim_time"] - 0.05) < 1e-12
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -44,6 +44,10 @@ def test_fresh_runs_report_wall_time_and_elapsed_per_configuration(tmp_path):
     text = "\n".join(log_cost.render_fresh(r))
     assert f"| `--out --mcap --rrd` | {r['wall_ms']['all']:.0f} |" in text
     assert f"takes {floor['wall_ms']:.0f} ms" in text
+    # the two-core bound: the run with all logs spread over two cores, never below the physics
+    assert set(r["cpu_ms"]) == set(log_cost.CONFIGS) and all(v >= 0 for v in r["cpu_ms"].values())
+    assert r["two_cores"] == pytest.approx(max(1.0, r["cpu_ms"]["all"] / 2 / r["wall_ms"]["physics"]))
+    assert f"takes at least {r['two_cores']:.2f}x" in text
 
 
 def test_busy_core_runs_at_the_logs_priority_and_is_reaped():

@@ -310,6 +310,7 @@ def _run(args, startup: StopSignals) -> int:
     if preloading is not None:  # library imports are start-up, like loading compiled code
         preloading.join()
     wall0, loading0 = time.perf_counter(), tiers.loading_seconds()  # set again at the first tick
+    cpu0 = time.process_time()
     with StopSignals() as stop:
         stop.code = startup.code  # a signal during start-up: no tick, every log finalized
         try:
@@ -331,6 +332,7 @@ def _run(args, startup: StopSignals) -> int:
                 sim.blocks_compiled()
             outputs.wait_opened()
             wall0, loading0 = time.perf_counter(), tiers.loading_seconds()
+            cpu0 = time.process_time()
             while sim.ticks < ticks and not stop.requested:
                 block = outputs.take()
                 block.rows = 0
@@ -350,7 +352,9 @@ def _run(args, startup: StopSignals) -> int:
             finally:
                 # the loading of compiled code (after the first ticks as plain Python) is left
                 # out, as when it came before the clock started
-                wall = time.perf_counter() - wall0 - (tiers.loading_seconds() - loading0)
+                loading = tiers.loading_seconds() - loading0
+                wall = time.perf_counter() - wall0 - loading
+                cpu = max(time.process_time() - cpu0 - loading, 0.0)
                 if outputs is not None:
                     outputs.logs.close()
                     mcap = outputs.recorders.get("--bag")
@@ -362,7 +366,7 @@ def _run(args, startup: StopSignals) -> int:
     if logs is not None and logs.failed and not code:
         code = EXIT_LOG_FAILED
         error = "; ".join(f"log {where} could not be written ({why})" for where, why in logs.failed)
-    summary = traj.summary(_run_info(sim, wall))
+    summary = traj.summary(_run_info(sim, wall, cpu))
     if error:
         summary["error"] = error
         summary["finite"] = bool(summary["finite"] and code != EXIT_DIVERGED)
@@ -441,9 +445,12 @@ def _report_log_failure(where: str, why: str) -> None:
           "goes on", file=sys.stderr)
 
 
-def _run_info(sim, wall: float) -> dict:
+def _run_info(sim, wall: float, cpu: float) -> dict:
+    """The run's settings and cost: ``wall_time`` and ``cpu_time`` (the process's CPU time, every
+    thread, over the same span: the physics and the outputs written beside it), s."""
     steps = sim.ticks * (sim.settings.substeps if sim.integrator.fixed_step else 1)
-    return {**sim.describe(), "wall_time": wall, "ticks": sim.ticks, "steps": steps,
+    return {**sim.describe(), "wall_time": wall, "cpu_time": cpu, "ticks": sim.ticks,
+            "steps": steps,
             "realtime_factor": (sim.t / wall) if wall > 0 else float("inf"),
             "evaluations": sim.mechanism.evaluations}
 
