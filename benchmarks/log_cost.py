@@ -14,15 +14,16 @@ after a warm-up (the logs' steady cost, without imports). The configurations:
 5. **all**: ``--out --mcap --rrd``.
 
 It prints the best wall time of each (ms per simulated second) and its ratio to the physics-only
-run (issue target for *all*: at most 1.5), and, for fresh processes, the ``cpu_time`` each reports
-(its CPU time over the same span, every thread), the machine's floor: the physics-only run with the
-second core kept busy by another process, which any log written beside the physics costs on this
-machine (a shared virtual machine's core slows when its neighbour works), and the two-core bound:
-the run with all logs can end no sooner than its CPU time spread over two cores. A first round, not counted, loads the compiled code and
-the log libraries. Wall times on a shared 2-core machine vary 2-4x from run to run: compare the
-ratios of one run. ``--json`` prints the figures as one JSON object; ``--parts`` adds the parts of
-one profiled run with all logs (physics, CSV, MCAP encoding, records and indexes, chunks and their
-compression, rerun), as shares of that run.
+run (issue target for *all*: at most 1.5), and, for fresh processes, the ``cpu_time`` each
+reports (its CPU time over the same span, every thread), the machine's floor (the physics-only
+run with the second core kept busy by another process, which any log written beside the physics
+costs on this machine: a shared virtual machine's core slows when its neighbour works) and the
+two-core bound (the run with all logs ends no sooner than its CPU time spread over two cores).
+A first round, not counted, loads the compiled code and the log libraries. Wall times on a
+shared 2-core machine vary 2-4x from run to run: compare the ratios of one run. ``--json`` prints
+the figures as one JSON object; ``--parts`` adds the parts of one profiled run with all logs
+(physics, CSV, MCAP encoding, records and indexes, chunks and their compression, rerun), as
+shares of that run.
 """
 
 from __future__ import annotations
