@@ -28,11 +28,12 @@ import numpy as np
 
 from vjm_ros.logs import events
 from vjm_ros.logs.signals import StopSignals, atomic, finalize_on_signals
-from vjm_ros.sim.samples import Sample, SampleBlock
+from vjm_ros.sim.samples import SampleBlock
 
 if TYPE_CHECKING:
     from vjm_ros.logs.mcap_recorder import McapRecorder
     from vjm_ros.logs.rerun_recorder import RerunRecorder
+    from vjm_ros.sim.samples import Sample
 
 __all__ = [
     "McapRecorder",

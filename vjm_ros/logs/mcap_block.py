@@ -20,18 +20,22 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import zstandard
 from mcap._chunk_builder import ChunkBuilder
-from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import ChunkIndex, Message
 from mcap.writer import CompressionType, IndexType, Writer
 
-from vjm_ros.core.model import Model
 from vjm_ros.logs import cdr, messages
-from vjm_ros.sim.samples import SampleBlock
+
+if TYPE_CHECKING:
+    from mcap.data_stream import RecordBuilder
+
+    from vjm_ros.core.model import Model
+    from vjm_ros.sim.samples import SampleBlock
 
 RECORD_HEADER = struct.Struct("<BQHIQQ")
 """Opcode, record length, channel id, sequence, log time, publish time of a Message record."""

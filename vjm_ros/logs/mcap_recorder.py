@@ -40,12 +40,12 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, IndexType
 
-from vjm_ros.core.model import Model
 from vjm_ros.logs import (
     Recorder,
     Timebase,
@@ -58,7 +58,10 @@ from vjm_ros.logs import (
     rosbag2,
     tick_of,
 )
-from vjm_ros.sim.samples import SampleBlock
+
+if TYPE_CHECKING:
+    from vjm_ros.core.model import Model
+    from vjm_ros.sim.samples import SampleBlock
 
 INDEX_BYTES_PER_HOUR = 16 * 2**20
 """Bound on what the writer keeps until the file is finalized, per recorded hour at 1 kHz with

@@ -51,6 +51,7 @@ import json
 import time
 import uuid
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyarrow as pa
@@ -68,7 +69,9 @@ from vjm_ros.logs import (
     tick_of,
 )
 from vjm_ros.logs.storage import VIEWER_SCHEMES
-from vjm_ros.sim.samples import SampleBlock
+
+if TYPE_CHECKING:
+    from vjm_ros.sim.samples import SampleBlock
 
 TIMELINE = "sim_time"
 ROOT = "mechanism"

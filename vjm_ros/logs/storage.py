@@ -18,10 +18,13 @@ from __future__ import annotations
 import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vjm_ros.core.errors import ConfigurationError
-from vjm_ros.logs import Recorder
-from vjm_ros.sim.samples import Sample, SampleBlock
+
+if TYPE_CHECKING:
+    from vjm_ros.logs import Recorder
+    from vjm_ros.sim.samples import Sample, SampleBlock
 
 MIN_FREE_BYTES = 64 * 2**20
 """Free space required on a log's file system at start, bytes."""

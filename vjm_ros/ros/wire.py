@@ -16,12 +16,15 @@ byte for byte, and test/test_tick_wire.py reads the refilled bytes back with rcl
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from vjm_ros.logs import cdr
 from vjm_ros.logs import messages as layouts
-from vjm_ros.sim.samples import Sample
+
+if TYPE_CHECKING:
+    from vjm_ros.sim.samples import Sample
 
 _pack_stamp = cdr.STAMP.pack_into
 _AT = cdr.STAMP_OFFSET
