@@ -177,3 +177,33 @@ def test_rosbags_opens_the_bag_directory_and_reads_the_qos(tmp_path):
         durabilities.append(qos.durability)
     assert depths == [10, 100]
     assert durabilities == [QosDurability.VOLATILE, QosDurability.TRANSIENT_LOCAL]
+
+
+def test_serialized_metadata_filled_in_is_the_dumped_text():
+    """The text made once and filled in as the log closes is, byte for byte, the document dumped
+    then, whatever the counts and times: before any message, as messages are counted, after a
+    topic is added (made again) and with a topic whose name holds a marker's digits (dumped)."""
+    bag = rosbag2.BagInfo()
+    joints = rosbag2.TopicRecord("/joint_states", "sensor_msgs/msg/JointState",
+                                 rosbag2.qos_yaml([rosbag2.DEFAULT_QOS]), HASH_JS)
+    bag.topics.append(joints)
+
+    def same(name="bag_0.mcap"):
+        assert bag.serialized_metadata(name) == rosbag2.serialized_metadata(bag.metadata(name))
+
+    assert bag.prepare_serialized_metadata("bag_0.mcap") is not None
+    same()  # no message yet: start and duration 0
+    bag.note_many(joints, 10_000, 1_000_000, 9_999_000_000)
+    same()
+    events = rosbag2.TopicRecord("/vjm_sim_node/events", "std_msgs/msg/String",
+                                 rosbag2.qos_yaml([rosbag2.EVENTS_QOS]), HASH_STR)
+    bag.topics.append(events)
+    bag.note(events, 12_345_678_901_234)
+    same()
+    same("other.mcap")
+    odd = rosbag2.TopicRecord("/a987654321987654321001", "std_msgs/msg/String",
+                              rosbag2.qos_yaml([rosbag2.DEFAULT_QOS]), HASH_STR)
+    bag.topics.append(odd)
+    bag.note(odd, 2)
+    assert bag.prepare_serialized_metadata("bag_0.mcap") is None
+    same()

@@ -176,6 +176,7 @@ class McapRecorder(Recorder):
             meta["time"] = "log time = simulated time since the recording started, ns"
             self._writer.add_metadata(SETTINGS_METADATA, _metadata_values(meta))
             self._writer.add_metadata(VERSIONS_METADATA, _metadata_values(package_versions()))
+            self.bag.prepare_serialized_metadata(self.path.name)  # filled in as the log closes
         except BaseException:
             self._file.close()
             raise
@@ -342,7 +343,7 @@ class McapRecorder(Recorder):
         try:
             self._writer.add_metadata(
                 BAG_METADATA,
-                {"serialized_metadata": rosbag2.serialized_metadata(self.bag_metadata())},
+                {"serialized_metadata": self.bag.serialized_metadata(self.path.name)},
             )
             self._writer.finish()
             self.flushed_count = self.message_count
