@@ -275,7 +275,7 @@ def _run(args, startup: StopSignals) -> int:
     from vjm_ros.core.mechanism import PLAIN_PART_TICKS
     from vjm_ros.jit import tiers
     from vjm_ros.scene.loader import load_scene
-    from vjm_ros.sim.samples import RUN_BLOCK_TICKS
+    from vjm_ros.sim.samples import FIRST_BLOCK_TICKS, RUN_BLOCK_TICKS
     from vjm_ros.sim.simulator import Simulator
     from vjm_ros.sim.trajectory import Trajectory, prepare_csv_writer
 
@@ -333,11 +333,13 @@ def _run(args, startup: StopSignals) -> int:
             outputs.wait_opened()
             wall0, loading0 = time.perf_counter(), tiers.loading_seconds()
             cpu0 = time.process_time()
+            block_ticks = min(FIRST_BLOCK_TICKS, RUN_BLOCK_TICKS)  # growing to it
             while sim.ticks < ticks and not stop.requested:
                 block = outputs.take()
                 block.rows = 0
                 try:
-                    sim.advance_block(block, min(RUN_BLOCK_TICKS, ticks - sim.ticks))
+                    sim.advance_block(block, min(block_ticks, ticks - sim.ticks))
+                    block_ticks = min(RUN_BLOCK_TICKS, block_ticks * 3 // 2)
                 finally:  # the ticks before a divergence are kept
                     outputs.put(block)
                 progress.update(sim.t)
