@@ -337,7 +337,7 @@ def render_section(r: dict) -> str:
         f"`vjm run {r['scene']}` with rk4 at 1 kHz and exact closure for {r['seconds']:g} "
         "simulated seconds, in one process, without and with each log; every configuration "
         f"runs {r['rounds']} times, interleaved with the others, and the best wall time counts: "
-        "the whole run (scene, logs opened, ticks in blocks of 1000, logs finalized, "
+        "the whole run (scene, logs opened, ticks in blocks of up to 1000, logs finalized, "
         "`trajectory.csv` and `summary.json` written), not the interpreter's start-up or the "
         "loading of compiled code and libraries (done once before). Only the ratios are "
         "meaningful, the machine is shared.",
@@ -363,8 +363,8 @@ def render_section(r: dict) -> str:
         "and compressed per chunk (zstd level -3), every record the bytes rosbags' serializer "
         "writes; rerun receives arrow columns built from whole arrays, one chunk per entity in "
         "one `send_chunks` every 5000 ticks.",
-        "- The physics runs in one thread, blocks of 1000 ticks per compiled call without the "
-        "GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
+        "- The physics runs in one thread, blocks of up to 1000 ticks per compiled call (the "
+        "first ones shorter, so that the logs start early) without the GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
         "blocks in a thread of their own (opening their files there while the compiled "
         "pipeline loads) at a lower scheduling priority than the physics, so on two cores the "
         "logs are written while the next blocks are computed. The wall time then depends on "
