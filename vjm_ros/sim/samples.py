@@ -92,7 +92,7 @@ unboxing): against blocks of 200 ticks, a run with all three logs takes about a 
 
 FIRST_BLOCK_TICKS = 100
 """Ticks of the first block of ``vjm run``; each block after it has half as many ticks more,
-up to :data:`RUN_BLOCK_TICKS` (100, 150, 225, ..., 759, then 1000). Until a block is filled,
+up to :data:`RUN_BLOCK_TICKS` (100, 150, 225, 337, 505, 757, then 1000). Until a block is filled,
 the writer threads have nothing of it to write: with 1000-tick blocks from the start the second
 core idled through the first block and, the logs taking longer per tick than the physics, again
 through part of the next ones, a gap the logs then carried past the last tick. With the blocks

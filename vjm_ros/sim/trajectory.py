@@ -251,8 +251,8 @@ class CsvStream:
             if _compiled_writer(len(table)):
                 size = float_text.buffer_size(*table.shape)
                 if len(self._text) < size:  # room for a whole batch: its pages fault once
-                    self._text = np.empty(float_text.buffer_size(
-                        max(len(table), CSV_BATCH_ROWS), table.shape[1]), dtype=np.uint8)
+                    self._text = np.empty(float_text.buffer_size(CSV_BATCH_ROWS, table.shape[1]),
+                                          dtype=np.uint8)
                 count = float_text.csv_into(table, self._text)
                 self._fh.buffer.write(memoryview(self._text)[:count])
             else:
