@@ -147,3 +147,43 @@ def test_bad_inputs_exit_2():
     assert out.returncode == 2 and "rk4" in out.stderr
     out = vjm("run", "four_bar", "--kernel", "numpy", "--duration", "0.01")
     assert out.returncode == 2 and "no longer a choice" in out.stderr and "'auto'" in out.stderr
+
+
+def test_growing_blocks_write_what_whole_blocks_write(tmp_path, monkeypatch):
+    """``vjm run`` computes its first blocks short and growing (``FIRST_BLOCK_TICKS``, half as
+    many ticks more each, up to ``RUN_BLOCK_TICKS``); the CSV is byte for byte, and the MCAP
+    messages (read by the ``mcap`` reader) are, those of the same run in 1000-tick blocks from
+    the first tick. The blocks' sizes are recorded to show that the two runs did block the
+    ticks differently."""
+    from mcap.reader import make_reader
+
+    from vjm_ros.app import cli
+    from vjm_ros.sim import samples
+    from vjm_ros.sim.simulator import Simulator
+
+    sizes: list[int] = []
+    advance = Simulator.advance_block
+
+    def recorded(self, block, ticks):
+        sizes.append(ticks)
+        return advance(self, block, ticks)
+
+    monkeypatch.setattr(Simulator, "advance_block", recorded)
+    runs = {}
+    default, whole_blocks = samples.FIRST_BLOCK_TICKS, samples.RUN_BLOCK_TICKS
+    for first in (default, whole_blocks):
+        monkeypatch.setattr(samples, "FIRST_BLOCK_TICKS", first)
+        sizes.clear()
+        out = tmp_path / str(first)
+        assert cli.main(["run", "four_bar", "--integrator", "rk4", "--closure", "exact",
+                         "--duration", "2.5", "--out", str(out), "--mcap",
+                         str(out / "run.mcap")]) == 0
+        with (out / "run.mcap").open("rb") as fh:
+            messages = [(channel.topic, message.log_time, message.sequence, message.data)
+                        for _, channel, message in make_reader(fh).iter_messages()]
+        runs[first] = (list(sizes), (out / "trajectory.csv").read_bytes(), messages)
+    growing, whole = runs[default], runs[whole_blocks]
+    assert growing[0] == [100, 150, 225, 337, 505, 757, 426]
+    assert whole[0] == [1000, 1000, 500]
+    assert growing[1] == whole[1]
+    assert len(growing[2]) > 5 * 2500 and growing[2] == whole[2]

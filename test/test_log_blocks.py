@@ -1,4 +1,4 @@
-"""Logs written in blocks of any size (``write_block``: ``vjm run``'s blocks of 1000 ticks, the
+"""Logs written in blocks of any size (``write_block``: ``vjm run``'s blocks of up to 1000 ticks, the
 node's of up to 100) hold exactly what the same ticks written one at a time (``write``, a block
 of one row) hold, and the MCAP records are rosbags' bytes.
 
