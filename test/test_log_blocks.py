@@ -1,6 +1,6 @@
-"""Logs written in blocks of any size (``write_block``: ``vjm run``'s blocks of up to 1000 ticks, the
-node's of up to 100) hold exactly what the same ticks written one at a time (``write``, a block
-of one row) hold, and the MCAP records are rosbags' bytes.
+"""Logs written in blocks of any size (``write_block``: ``vjm run``'s blocks of up to 1000
+ticks, the node's of up to 100) hold exactly what the same ticks written one at a time
+(``write``, a block of one row) hold, and the MCAP records are rosbags' bytes.
 
 Oracles: the same ticks in blocks of one row, for everything that depends on how ticks are split
 into blocks (chunks, batches, sequence numbers, decimation of the markers and the geometry), and
