@@ -657,16 +657,17 @@ def test_executable_runs_five_bar_for_its_duration_while_another_process_listens
     listener = Listener({"/joint_states": JointState, f"{NODE}/closures/pin/wrench": WrenchStamped})
     before = set(glob.glob("/dev/shm/fastdds_*"))
     try:
-        # 1.5 s in realtime: long enough for the listener to match both publishers mid-run
-        code, out = finish(node_process("scene:=five_bar", "duration:=1.5"))
+        # 4 s in realtime: long enough for the listener to match both publishers mid-run, also
+        # on a loaded machine (a CI run saw none of 1500 ticks' messages arrive in 1.5 s)
+        code, out = finish(node_process("scene:=five_bar", "duration:=4.0"))
         wait_for(lambda: listener.count[f"{NODE}/closures/pin/wrench"] > 0, 5.0,
                  f"wrenches (received {listener.count}; node output:\n{out})")
     finally:
         listener.close()
     assert code == 0, out
     summary = summary_of(out)
-    assert summary["reason"] == "duration" and summary["ticks"] == 1500
-    # a tenth of the ticks at least: what the listener receives once it has matched
+    assert summary["reason"] == "duration" and summary["ticks"] == 4000
+    # some of the ticks at least: what the listener receives once it has matched
     assert listener.count["/joint_states"] > 150 and listener.count[f"{NODE}/closures/pin/wrench"] > 15
     assert not orphaned_shm(before)
 
