@@ -364,8 +364,9 @@ def render_section(r: dict) -> str:
         "writes; rerun receives arrow columns built from whole arrays, one chunk per entity in "
         "one `send_chunks` every 5000 ticks.",
         "- The physics runs in one thread, blocks of up to 1000 ticks per compiled call (the "
-        "first ones shorter, so that the logs start early) without the GIL; the trajectory and its CSV, the MCAP log and the rerun recording each take the "
-        "blocks in a thread of their own (opening their files there while the compiled "
+        "first ones shorter, so that the logs start early) without the GIL; the trajectory and "
+        "its CSV, the MCAP log and the rerun recording each take the blocks in a thread of their "
+        "own (opening their files there while the compiled "
         "pipeline loads) at a lower scheduling priority than the physics, so on two cores the "
         "logs are written while the next blocks are computed. The wall time then depends on "
         "what else the machine runs: with the second core busy, the logs' CPU adds up with the "

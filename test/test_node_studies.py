@@ -35,7 +35,8 @@ def test_node_cost_measures_a_node_that_published_every_topic():
         assert math.isfinite(row[key]) and row[key] > 0, key
 
 
-@pytest.mark.slow  # the study's own check: a pacing floor, then a live node and controller (about 6 s)
+# the study's own check: a pacing floor, then a live node and controller (about 6 s)
+@pytest.mark.slow
 def test_live_loop_measures_commands_that_reached_the_node(capfd, monkeypatch):
     """One second live with the controller in the loop, through the study's command line:
     commands were sent, some showed in the joint states (the lag is then measured, never

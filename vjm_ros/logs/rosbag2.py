@@ -220,10 +220,13 @@ class BagInfo:
         file_name : str
             The ``.mcap`` file's name (relative to the bag directory).
         """
+        return self._document(file_name, *self._numbers())
+
+    def _numbers(self) -> tuple[int, int, int, list[int]]:
+        """The document's numbers: start (ns), duration (ns), message count, count per topic."""
         start = self.start_ns or 0
-        duration = max(0, (self.end_ns or start) - start)
-        return self._document(file_name, start, duration, sum(t.count for t in self.topics),
-                              [t.count for t in self.topics])
+        counts = [t.count for t in self.topics]
+        return start, max(0, (self.end_ns or start) - start), sum(counts), counts
 
     def serialized_metadata(self, file_name: str) -> str:
         """``serialized_metadata(self.metadata(file_name))``, the same text, filled in from a
@@ -232,10 +235,8 @@ class BagInfo:
         (:meth:`prepare_serialized_metadata`); as it closes, filling it in takes some 15 µs
         where dumping the document takes 1.2 ms (PyYAML's representer; a bag of seven topics),
         on the last log's path to its end."""
-        start = self.start_ns or 0
-        duration = max(0, (self.end_ns or start) - start)
-        values = [start, duration, sum(t.count for t in self.topics)]
-        values += [t.count for t in self.topics]
+        start, duration, count, counts = self._numbers()
+        values = [start, duration, count, *counts]
         parts = self.prepare_serialized_metadata(file_name)
         if parts is None:  # a marker's digits also stand elsewhere in the text
             return serialized_metadata(self.metadata(file_name))
