@@ -163,6 +163,69 @@ def test_consumers_run_in_threads_of_their_own():
     assert names == {"vjm-x"}
 
 
+def test_consumers_that_share_a_thread_see_every_block_in_turn():
+    """A sequence of consumers shares one thread: each sees every block, in order; they start
+    in their order before either writes, and finish after the last block."""
+    events: list = []
+
+    def consumer(name):
+        return Consumer(name,
+                        lambda b: events.append((name, b.value, threading.current_thread().name)),
+                        lambda: events.append((name, "finish")),
+                        lambda: events.append((name, "start")))
+
+    with BlockFanOut(Box, [[consumer("a"), consumer("b")], consumer("c")], depth=2) as fan:
+        for i in range(20):
+            block = fan.take()
+            block.value = i
+            fan.put(block)
+    shared = [e for e in events if e[0] in "ab"]
+    assert shared[:2] == [("a", "start"), ("b", "start")]
+    assert shared[2:-2] == [(n, i, "a + b") for i in range(20) for n in "ab"]
+    assert shared[-2:] == [("a", "finish"), ("b", "finish")]
+    assert [e[1] for e in events if e[0] == "c" and len(e) == 3] == list(range(20))
+    assert {e[2] for e in events if e[0] == "c" and len(e) == 3} == {"c"}
+
+
+@pytest.mark.parametrize("fails_at", ["start", "write"])
+def test_a_consumer_that_fails_stops_alone_in_the_thread_it_shares(fails_at):
+    """The consumer beside one that fails at a block writes every block handed over, and the
+    failed one is handed no more; beside one that cannot start, the other starts and is
+    finished (the next ``put`` raises, as for a consumer in a thread of its own); each failure
+    is raised in the calling thread."""
+    seen, finished, tried = [], [], []
+    handed = threading.Event()  # the write case: every block is queued before the failure
+
+    def cannot_open():
+        raise OSError("cannot open")
+
+    def broken(block):
+        tried.append(block.value)
+        if block.value >= 3:
+            raise RuntimeError("consumer broke")
+
+    bad = Consumer("bad", broken, lambda: finished.append("bad"),
+                   cannot_open if fails_at == "start" else handed.wait)
+    good = Consumer("good", lambda b: seen.append(b.value), lambda: finished.append("good"))
+    fan = BlockFanOut(Box, [[bad, good]], depth=10)
+    if fails_at == "start":
+        assert fan.wait_started() is False
+    with pytest.raises(OSError if fails_at == "start" else RuntimeError):
+        try:
+            for i in range(10):
+                block = fan.take()
+                block.value = i
+                fan.put(block)
+        finally:
+            handed.set()
+            fan.close()
+    if fails_at == "start":
+        assert seen == tried == [] and finished == ["good"]
+    else:
+        assert seen == list(range(10)) and tried == [0, 1, 2, 3]
+        assert finished == ["bad", "good"]
+
+
 def _priority() -> int:
     return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
 

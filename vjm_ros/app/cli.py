@@ -318,7 +318,7 @@ def _run(args, startup: StopSignals) -> int:
             first = sim.sample()
             traj.append(first)
             # Blocks of ticks, each one compiled call where the integrator allows it; signals and
-            # progress are taken between blocks. The trajectory and its CSV, and each log, take
+            # progress are taken between blocks. The trajectory and its CSV, and the logs, take
             # the blocks in threads of their own while the next blocks are computed.
             from vjm_ros.app.run_outputs import RunOutputs
 

@@ -4,14 +4,17 @@
 (:meth:`vjm_ros.sim.simulator.Simulator.advance_block`); what is done with a block (the
 trajectory and its CSV, the MCAP and rerun logs) is independent of the next block's physics.
 :class:`BlockFanOut` hands each filled block to every *consumer*, each consumer in a thread of its
-own that takes the blocks in the order they were filled, and gives the block back for refilling
-once every consumer is done with it. So on two cores the logs are written while the physics runs,
-and the consumers run beside each other where they release the GIL (compiled CSV formatting,
-chunk compression, file writes).
+own (or a few consumers sharing one thread, one after the other) that takes the blocks in the
+order they were filled, and gives the block back for refilling once every consumer is done with
+it. So on two cores the logs are written while the physics runs, and the consumers run beside
+each other where they release the GIL (compiled CSV formatting, chunk compression, file writes).
+Consumers that share a thread cost fewer thread switches and GIL hand-overs, which on two cores
+take time from the physics and from each other.
 
 Guarantees:
 
-* each consumer's ``start`` (opening its file) runs first, in its thread, beside the physics,
+* each consumer's ``start`` (opening its file) runs first, in its thread, beside the physics
+  (consumers sharing a thread start one after the other, in order, before any of them writes),
   and the consumer writes blocks as soon as it has started; a consumer whose ``start`` fails
   writes nothing and is not finished, and the error is raised in the calling thread (by the
   next :meth:`put` or by :meth:`close`); :attr:`BlockFanOut.all_started` tells a consumer
@@ -20,8 +23,8 @@ Guarantees:
   returns (also when the run ends by a signal or an exception: ``close`` is called in a
   ``finally``), then runs its ``finish`` (closing its files) in its thread;
 * an exception raised by a consumer (other than what the consumer handles itself, such as a
-  log given up on a full disk) stops that consumer and is raised again in the calling thread by
-  the next :meth:`put` or by :meth:`close`;
+  log given up on a full disk) stops that consumer (not those sharing its thread) and is raised
+  again in the calling thread by the next :meth:`put` or by :meth:`close`;
 * at most ``depth`` blocks exist: the physics waits for a free block when the consumers lag.
 
 The consumers' threads run at a lower scheduling priority than the physics (:data:`NICENESS`,
@@ -110,7 +113,8 @@ class BlockFanOut:
     ----------
     make_block : callable
         ``make_block()`` returns a new empty block (called at most ``depth`` times).
-    consumers : sequence of Consumer
+    consumers : sequence of Consumer or of sequences of Consumer
+        A sequence of consumers shares one thread: each block goes to them in their order.
     depth : int
         Blocks in circulation: one being filled, the others queued or being written.
 
@@ -119,8 +123,10 @@ class BlockFanOut:
     Use as a context manager, or call :meth:`close` in a ``finally``.
     """
 
-    def __init__(self, make_block: Callable[[], object], consumers: Sequence[Consumer],
-                 depth: int = 16):
+    def __init__(self, make_block: Callable[[], object],
+                 consumers: Sequence[Consumer | Sequence[Consumer]], depth: int = 16):
+        groups = [(c,) if isinstance(c, Consumer) else tuple(c) for c in consumers]
+        groups = [g for g in groups if g]
         self._make_block = make_block
         self._free: queue.SimpleQueue = queue.SimpleQueue()
         self._made = 0
@@ -132,19 +138,20 @@ class BlockFanOut:
         self._closed = False
         self._interval = sys.getswitchinterval()
         sys.setswitchinterval(min(self._interval, SWITCH_INTERVAL))
-        self._starts_left = len(consumers)
+        self._starts_left = sum(len(g) for g in groups)
         self._starts_done = threading.Event()
-        if not consumers:
+        if not groups:
             self._starts_done.set()
         self._start_failed = False
         if IN_CALLING_THREAD:
-            self._queues = [_InCallingThread(self, c) for c in consumers]
+            self._queues = [_InCallingThread(self, c) for g in groups for c in g]
             self._threads = []
             return
-        self._queues = [queue.SimpleQueue() for _ in consumers]
+        self._queues = [queue.SimpleQueue() for _ in groups]
         self._threads = [
-            threading.Thread(target=self._serve, args=(c, q), name=c.name, daemon=True)
-            for c, q in zip(consumers, self._queues, strict=True)
+            threading.Thread(target=self._serve, args=(g, q), daemon=True,
+                             name=" + ".join(c.name for c in g))
+            for g, q in zip(groups, self._queues, strict=True)
         ]
         running = 0
         try:
@@ -153,7 +160,7 @@ class BlockFanOut:
                 running += 1
         except BaseException:  # no thread to be had: the others stop, nothing is written
             self._start_failed = True
-            for _ in self._threads[running:]:
+            for _ in range(sum(len(g) for g in groups[running:])):
                 self._count_start()
             for q in self._queues[:running]:
                 q.put(_STOP)
@@ -220,18 +227,21 @@ class BlockFanOut:
         self.close()
 
     # ------------------------------------------------------------------ consumer threads
-    def _serve(self, consumer: Consumer, blocks: queue.SimpleQueue) -> None:
+    def _serve(self, group: tuple[Consumer, ...], blocks: queue.SimpleQueue) -> None:
+        """One thread's work: start its consumers, hand them every block in turn (each until
+        it fails), then finish those that started."""
         lower_priority(NICENESS)
-        started = self._start(consumer)
-        failed = not started
+        started = [self._start(consumer) for consumer in group]
+        writing = [c for c, ok in zip(group, started, strict=True) if ok]
         while True:
             block = blocks.get()
             if block is _STOP:
                 break
-            failed = failed or not self._write(consumer, block)
+            writing = [c for c in writing if self._write(c, block)]
             self._release(block)
-        if started:
-            self._finish(consumer)
+        for consumer, ok in zip(group, started, strict=True):
+            if ok:
+                self._finish(consumer)
 
     def _call(self, step, *args) -> bool:
         """Run one of a consumer's ``start``, ``write`` or ``finish`` (None: nothing to run);
