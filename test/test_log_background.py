@@ -317,6 +317,35 @@ def test_vjm_run_writes_the_csv_of_the_ticks_one_by_one_with_every_log(tmp_path)
     assert (out / "trajectory.csv").read_bytes() == row_by_row_csv("four_bar", 437)
 
 
+@pytest.mark.parametrize("mcap_option", ["--mcap", "--bag"])
+def test_vjm_run_writes_the_mcap_log_in_a_thread_of_its_own(tmp_path, monkeypatch, mcap_option):
+    """The MCAP log (a file or a rosbag2 directory) has a writing thread of its own; the rerun
+    log shares the trajectory's (app/run_outputs.py, OWN_THREAD)."""
+    from vjm_ros.app import cli
+    from vjm_ros.logs.mcap_recorder import McapRecorder
+    from vjm_ros.logs.rerun_recorder import RerunRecorder
+    from vjm_ros.sim.trajectory import Trajectory
+
+    threads: dict[str, set] = {"mcap": set(), "rrd": set(), "csv": set()}
+    for key, cls in (("mcap", McapRecorder), ("rrd", RerunRecorder), ("csv", Trajectory)):
+        method = "extend" if cls is Trajectory else "write_block"
+        real = getattr(cls, method)
+
+        def spy(self, block, _real=real, _key=key):
+            threads[_key].add(threading.current_thread().name)
+            return _real(self, block)
+
+        monkeypatch.setattr(cls, method, spy)
+    target = tmp_path / ("run.mcap" if mcap_option == "--mcap" else "bag")
+    code = cli.main(["run", "four_bar", "--integrator", "rk4", "--closure", "exact",
+                     "--duration", "0.3", "--out", str(tmp_path / "out"), mcap_option,
+                     str(target), "--rrd", str(tmp_path / "run.rrd"), "--json"])
+    assert code == 0
+    assert len(threads["mcap"]) == 1 and threads["rrd"] == threads["csv"], threads
+    assert len(threads["rrd"]) == 1 and threads["rrd"] != threads["mcap"], threads
+    assert threading.current_thread().name not in threads["mcap"] | threads["rrd"]
+
+
 def test_a_signal_while_the_run_starts_up_stops_it_before_its_first_tick(tmp_path, monkeypatch,
                                                                         capsys):
     """SIGINT while the scene loads (before the run's own handling, where Python's default

@@ -66,8 +66,9 @@ def preload_libraries(outputs: Sequence[str]) -> threading.Thread:
     return thread
 
 
-OWN_THREAD = ("--mcap",)
-"""Logs written in a thread of their own; the others share the trajectory's thread. The MCAP
+OWN_THREAD = ("--mcap", "--bag")
+"""Logs written in a thread of their own (the MCAP log, as a file or in a rosbag2 directory); the
+others share the trajectory's thread. The MCAP
 log's Python work (record images, indexes, chunk compression) is the largest; the trajectory and
 the rerun log leave much of theirs to compiled code and rerun's threads. ``vjm run four_bar --out
 --mcap --rrd`` (rk4, exact closure, 10 s at 1 kHz), fresh processes, paired rounds against three
