@@ -239,8 +239,8 @@ def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float
     outputs written in the calling thread after each block
     (:data:`vjm_ros.logs.background.IN_CALLING_THREAD`).
 
-    In ``vjm run`` each output works in a thread of its own; run one after the other in one
-    thread, a profile shows what each part costs without the waits of threads for the GIL or
+    In ``vjm run`` the outputs work in threads of their own (the MCAP log in one, the CSV and
+    the rerun log in another); run one after the other in one thread, a profile shows what each part costs without the waits of threads for the GIL or
     a core. ``"run"`` is that run's wall time: the sum of the physics and of every output.
     Profiling slows calls down, the more the smaller they are: read the parts as shares, not
     as absolute times.
@@ -382,7 +382,7 @@ def render_section(r: dict) -> str:
             "",
             "Where the time of one run with all logs goes, under `cProfile`, with the outputs "
             "written one after the other in the thread of the physics (in `vjm run` they work "
-            "in threads of their own; here each part's cost shows without waits) "
+            "in two threads of their own; here each part's cost shows without waits) "
             f"({1e3 * parts['run']:.0f} ms; profiling slows small calls most, so read shares, "
             "not times):",
             "",
