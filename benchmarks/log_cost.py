@@ -240,10 +240,10 @@ def breakdown(scene: str = "four_bar", seconds: float = 10.0) -> dict[str, float
     (:data:`vjm_ros.logs.background.IN_CALLING_THREAD`).
 
     In ``vjm run`` the outputs work in threads of their own (the MCAP log in one, the CSV and
-    the rerun log in another); run one after the other in one thread, a profile shows what each part costs without the waits of threads for the GIL or
-    a core. ``"run"`` is that run's wall time: the sum of the physics and of every output.
-    Profiling slows calls down, the more the smaller they are: read the parts as shares, not
-    as absolute times.
+    the rerun log in another); run one after the other in one thread, a profile shows what each
+    part costs without the waits of threads for the GIL or a core. ``"run"`` is that run's
+    wall time: the sum of the physics and of every output. Profiling slows calls down, the more
+    the smaller they are: read the parts as shares, not as absolute times.
     """
     import cProfile
     import pstats

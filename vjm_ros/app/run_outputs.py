@@ -35,8 +35,8 @@ def preload_libraries(outputs: Sequence[str]) -> threading.Thread:
     A fresh ``vjm run`` spends most of what its logs cost importing their libraries; started
     before the scene is loaded and the kernels are read from numba's cache, the imports overlap
     them instead of following them. The logs' package versions (read from the installed
-    packages' metadata, 15-30 ms) are read here too. An import that fails here fails again, with its message,
-    where the output opens.
+    packages' metadata, 15-30 ms) are read here too. An import that fails here fails again,
+    with its message, where the output opens.
 
     Parameters
     ----------
@@ -68,12 +68,13 @@ def preload_libraries(outputs: Sequence[str]) -> threading.Thread:
 
 OWN_THREAD = ("--mcap", "--bag")
 """Logs written in a thread of their own (the MCAP log, as a file or in a rosbag2 directory); the
-others share the trajectory's thread. The MCAP
-log's Python work (record images, indexes, chunk compression) is the largest; the trajectory and
-the rerun log leave much of theirs to compiled code and rerun's threads. ``vjm run four_bar --out
---mcap --rrd`` (rk4, exact closure, 10 s at 1 kHz), fresh processes, paired rounds against three
-threads (one per output): median ``wall_time`` 0.93 and 0.94 times (25 and 30 rounds), median
-``cpu_time`` 106 against 125 ms; with ``--out --rrd`` alone, one thread or two: 1.01 (20 rounds)."""
+others share the trajectory's thread. The MCAP log's Python work (record images, indexes, chunk
+compression) is the largest; the trajectory and the rerun log leave much of theirs to compiled
+code and rerun's threads. ``vjm run four_bar --out --mcap --rrd`` (rk4, exact closure, 10 s at
+1 kHz), fresh processes, paired rounds against one thread per output: median ``wall_time`` 0.93,
+0.94 and 0.95 times (25, 30 and 25 rounds; a first 10-round measure: 1.03), median ``cpu_time``
+106 against 125 ms and 125 against 132 ms; with ``--out --rrd`` alone, one thread against two:
+1.01 (20 rounds)."""
 
 
 class RunOutputs:
