@@ -32,6 +32,14 @@ class Box:
         self.value = None
 
 
+def hand_over(fan: BlockFanOut, count: int) -> None:
+    """Fill ``count`` blocks with the values 0, 1, ... and hand each over, in order."""
+    for i in range(count):
+        block = fan.take()
+        block.value = i
+        fan.put(block)
+
+
 def test_every_consumer_sees_every_block_in_order_and_blocks_are_reused():
     seen = {"a": [], "b": []}
     finished = []
@@ -48,10 +56,7 @@ def test_every_consumer_sees_every_block_in_order_and_blocks_are_reused():
     consumers = [Consumer("a", lambda b: seen["a"].append(b.value), lambda: finished.append("a")),
                  Consumer("b", slow, lambda: finished.append("b"))]
     with BlockFanOut(make, consumers, depth=3) as fan:
-        for i in range(50):
-            block = fan.take()
-            block.value = i
-            fan.put(block)
+        hand_over(fan, 50)
     assert seen == {"a": list(range(50)), "b": list(range(50))}
     assert sorted(finished) == ["a", "b"]
     assert len(made) == 3
@@ -70,10 +75,7 @@ def test_a_failing_consumer_is_raised_by_close_after_the_others_finish():
     fan = BlockFanOut(Box, consumers, depth=2)
     with pytest.raises(RuntimeError, match="consumer broke"):
         try:
-            for i in range(20):
-                block = fan.take()  # blocks of a failed consumer are still given back
-                block.value = i
-                fan.put(block)
+            hand_over(fan, 20)  # blocks of a failed consumer are still given back
         finally:
             fan.close()
     assert seen == list(range(len(seen))) and len(seen) >= 6
@@ -96,10 +98,7 @@ def test_a_consumer_that_cannot_start_writes_nothing_and_its_error_is_raised():
     assert fan.wait_started() is False and fan.start_failed
     with pytest.raises(OSError, match="cannot open"):
         try:
-            for i in range(5):
-                block = fan.take()
-                block.value = i
-                fan.put(block)
+            hand_over(fan, 5)
         finally:
             fan.close()
     assert written["fails"] == [] and finished == ["opens"]  # what opened is closed
@@ -147,10 +146,7 @@ def test_in_the_calling_thread_consumers_see_the_same_blocks(monkeypatch):
                           lambda: events.append("finish"), lambda: events.append("start"))]
     with BlockFanOut(Box, consumers, depth=2) as fan:
         assert fan.all_started
-        for i in range(5):
-            block = fan.take()
-            block.value = i
-            fan.put(block)
+        hand_over(fan, 5)
     assert seen == [(threading.current_thread().name, i) for i in range(5)]
     assert events == ["start", "finish"]
 
@@ -175,10 +171,7 @@ def test_consumers_that_share_a_thread_see_every_block_in_turn():
                         lambda: events.append((name, "start")))
 
     with BlockFanOut(Box, [[consumer("a"), consumer("b")], consumer("c")], depth=2) as fan:
-        for i in range(20):
-            block = fan.take()
-            block.value = i
-            fan.put(block)
+        hand_over(fan, 20)
     shared = [e for e in events if e[0] in "ab"]
     assert shared[:2] == [("a", "start"), ("b", "start")]
     assert shared[2:-2] == [(n, i, "a + b") for i in range(20) for n in "ab"]
@@ -212,10 +205,7 @@ def test_a_consumer_that_fails_stops_alone_in_the_thread_it_shares(fails_at):
         assert fan.wait_started() is False
     with pytest.raises(OSError if fails_at == "start" else RuntimeError):
         try:
-            for i in range(10):
-                block = fan.take()
-                block.value = i
-                fan.put(block)
+            hand_over(fan, 10)
         finally:
             handed.set()
             fan.close()
