@@ -115,15 +115,12 @@ class RunOutputs:
         self._csv_path = csv_path
         self._csv: CsvStream | None = None
         self._block_ticks = block_ticks
+        logs = [(key, self._log_consumer(key, opener)) for key, opener in openers]
         shared = [Consumer("vjm-trajectory", self._extend, self._close_csv)]
-        consumers: list = [shared]
-        for key, opener in openers:
-            consumer = self._log_consumer(key, opener)
-            if key in OWN_THREAD:
-                consumers.append(consumer)
-            else:
-                shared.append(consumer)
-        self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), consumers, depth=8)
+        shared += [consumer for key, consumer in logs if key not in OWN_THREAD]
+        alone = [consumer for key, consumer in logs if key in OWN_THREAD]
+        self._fan = BlockFanOut(lambda: SampleBlock(traj.model, block_ticks), [shared, *alone],
+                                depth=8)
 
     def wait_opened(self) -> None:
         """Wait until every log has opened or failed to open (a failure is raised by
