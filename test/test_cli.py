@@ -20,6 +20,7 @@ SUMMARY_KEYS = {
     "sim_time",
     "wall_time",
     "cpu_time",
+    "outputs_wait_time",
     "steps",
     "realtime_factor",
     "max_closure_error",
@@ -98,6 +99,7 @@ def test_run_writes_contract(tmp_path, scene):
     process_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     assert 0.0 <= last["cpu_time"] < 0.1 * process_cpu
     assert last["cpu_time"] <= last["wall_time"] * os.cpu_count() + 5e-3
+    assert 0.0 <= last["outputs_wait_time"] <= last["wall_time"]
     assert last["scene"] == scene and last["finite"] is True
     assert last["steps"] == 50 and abs(last["sim_time"] - 0.05) < 1e-12
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -336,6 +336,30 @@ def test_vjm_run_writes_the_mcap_log_in_a_thread_of_its_own(tmp_path, monkeypatc
     assert threading.current_thread().name not in threads["mcap"] | threads["rrd"]
 
 
+def test_the_wait_for_the_outputs_after_the_last_tick_is_reported(tmp_path, monkeypatch, capsys):
+    """``outputs_wait_time`` is the part of ``wall_time`` after the last tick: a log whose
+    finalization takes 0.3 s (a slow disk) shows in it whole, and the ticks before do not."""
+    from vjm_ros.app import cli
+    from vjm_ros.logs.mcap_recorder import McapRecorder
+
+    real = McapRecorder._finalize
+
+    def slow_finalize(self):
+        time.sleep(0.3)
+        real(self)
+
+    monkeypatch.setattr(McapRecorder, "_finalize", slow_finalize)
+    code = cli.main(["run", "four_bar", "--duration", "0.2", "--mcap", str(tmp_path / "run.mcap"),
+                     "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    # the sleep lies between the last tick and the end of wall_time (sleep overshoots, never
+    # undershoots); the 200 ticks before it are not in the wait
+    assert 0.3 <= summary["outputs_wait_time"] <= summary["wall_time"]
+    assert summary["wall_time"] - summary["outputs_wait_time"] > 0.0
+    assert summary["ticks"] == 200
+
+
 def test_a_signal_while_the_run_starts_up_stops_it_before_its_first_tick(tmp_path, monkeypatch,
                                                                         capsys):
     """SIGINT while the scene loads (before the run's own handling, where Python's default

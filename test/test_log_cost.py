@@ -44,6 +44,10 @@ def test_fresh_runs_report_wall_time_and_elapsed_per_configuration(tmp_path):
     text = "\n".join(log_cost.render_fresh(r))
     assert f"| `--out --mcap --rrd` | {r['wall_ms']['all']:.0f} |" in text
     assert f"takes {floor['wall_ms']:.0f} ms" in text
+    # what came after the last tick: a part of the best run's wall_time, shown with it
+    assert set(r["wait_ms"]) == set(log_cost.CONFIGS)
+    assert all(0.0 <= r["wait_ms"][c] <= r["wall_ms"][c] for c in log_cost.CONFIGS)
+    assert f"{r['wall_ms']['all']:.0f} | {r['ratio']['all']:.2f} | {r['wait_ms']['all']:.1f} |" in text
     # the two-core bound: the run with all logs spread over two cores, never below the physics
     assert set(r["cpu_ms"]) == set(log_cost.CONFIGS) and all(v >= 0 for v in r["cpu_ms"].values())
     bound = max(1.0, r["cpu_ms"]["all"] / 2 / r["wall_ms"]["physics"])

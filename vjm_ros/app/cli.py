@@ -347,6 +347,7 @@ def _run(args, startup: StopSignals) -> int:
         except DivergenceError as exc:
             code, error = EXIT_DIVERGED, str(exc)
         finally:
+            last_tick = time.perf_counter()
             progress.close()
             try:
                 if outputs is not None:
@@ -355,7 +356,9 @@ def _run(args, startup: StopSignals) -> int:
                 # the loading of compiled code (after the first ticks as plain Python) is left
                 # out, as when it came before the clock started
                 loading = tiers.loading_seconds() - loading0
-                wall = time.perf_counter() - wall0 - loading
+                end = time.perf_counter()
+                wall = end - wall0 - loading
+                waited = min(max(end - last_tick, 0.0), max(wall, 0.0))
                 cpu = max(time.process_time() - cpu0 - loading, 0.0)
                 if outputs is not None:
                     outputs.logs.close()
@@ -368,7 +371,7 @@ def _run(args, startup: StopSignals) -> int:
     if logs is not None and logs.failed and not code:
         code = EXIT_LOG_FAILED
         error = "; ".join(f"log {where} could not be written ({why})" for where, why in logs.failed)
-    summary = traj.summary(_run_info(sim, wall, cpu))
+    summary = traj.summary(_run_info(sim, wall, cpu, waited))
     if error:
         summary["error"] = error
         summary["finite"] = bool(summary["finite"] and code != EXIT_DIVERGED)
@@ -447,11 +450,14 @@ def _report_log_failure(where: str, why: str) -> None:
           "goes on", file=sys.stderr)
 
 
-def _run_info(sim, wall: float, cpu: float) -> dict:
-    """The run's settings and cost: ``wall_time`` and ``cpu_time`` (the process's CPU time, every
-    thread, over the same span: the physics and the outputs written beside it), s."""
+def _run_info(sim, wall: float, cpu: float, waited: float) -> dict:
+    """The run's settings and cost, s: ``wall_time``, ``cpu_time`` (the process's CPU time, every
+    thread, over the same span: the physics and the outputs written beside it) and
+    ``outputs_wait_time`` (the part of ``wall_time`` after the last tick, spent finishing the
+    outputs: the blocks still queued, the CSV closed, the logs finalized)."""
     steps = sim.ticks * (sim.settings.substeps if sim.integrator.fixed_step else 1)
-    return {**sim.describe(), "wall_time": wall, "cpu_time": cpu, "ticks": sim.ticks,
+    return {**sim.describe(), "wall_time": wall, "cpu_time": cpu, "outputs_wait_time": waited,
+            "ticks": sim.ticks,
             "steps": steps,
             "realtime_factor": (sim.t / wall) if wall > 0 else float("inf"),
             "evaluations": sim.mechanism.evaluations}
