@@ -281,6 +281,28 @@ def test_chunks_close_every_chunk_seconds(run, tmp_path):
     assert max(spans) <= 0.05e9
 
 
+def test_vjm_run_closes_a_chunk_every_simulated_second(tmp_path):
+    """``vjm run`` writes its MCAP log in chunks of one simulated second (MCAP_CHUNK_SECONDS),
+    every message in one of them, in time order, as the reader and rosbags read it."""
+    from rosbags.highlevel import AnyReader
+
+    from vjm_ros.app import cli
+    from vjm_ros.app.run_outputs import MCAP_CHUNK_SECONDS
+
+    path = tmp_path / "run.mcap"
+    assert cli.main(["run", "four_bar", "--duration", "2.5", "--mcap", str(path)]) == 0
+    summary = summary_of(path)[1]
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    spans = [(c.message_start_time, c.message_end_time) for c in chunks]
+    # 2.5 s: two whole seconds and the half after them (a chunk closes at the first tick a
+    # second after its first, so it spans one second exactly; the clock is in whole ns)
+    assert len(chunks) == 3
+    assert [b - a for a, b in spans[:2]] == [int(MCAP_CHUNK_SECONDS * 1e9)] * 2
+    assert all(b[0] > a[1] for a, b in zip(spans[:-1], spans[1:], strict=True))
+    with AnyReader([path]) as reader:
+        assert sum(1 for _ in reader.messages()) == summary.statistics.message_count
+
+
 def test_close_is_idempotent_and_write_after_close_fails(run, tmp_path):
     scene, sim, first, _ = run
     rec = McapRecorder(tmp_path / "x.mcap", scene.model, sim.describe(), scene.text)

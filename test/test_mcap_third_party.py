@@ -26,7 +26,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.metadata import parse_qos
 
-SCENE, SECONDS, RATE = "five_bar", 1.0, 1000
+SCENE, SECONDS, RATE = "five_bar", 1.5, 1000  # two chunks (vjm run: a simulated second each)
 TICKS = int(SECONDS * RATE) + 1  # the state at t = 0, then one per tick
 NODE = "/vjm_sim_node"
 PER_TICK = ["/joint_states", "/clock", f"{NODE}/constraint_forces", f"{NODE}/energy",
@@ -149,9 +149,15 @@ def test_channel_metadata_parses_as_rosbag2_qos_and_type_hashes(run):
 
 def test_a_truncated_log_recovered_reads_in_rosbags(run, tmp_path):
     bag, _ = run
-    data = (bag / "five_bar_bag_0.mcap").read_bytes()
+    path = bag / "five_bar_bag_0.mcap"
+    data = path.read_bytes()
+    with open(path, "rb") as f:
+        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
+    assert len(chunks) >= 2
+    last = chunks[-1]  # cut inside the last chunk: every chunk before it is complete
     cut, fixed = tmp_path / "cut.mcap", tmp_path / "fixed.mcap"
-    cut.write_bytes(data[: len(data) // 2])
+    cut.write_bytes(data[: last.chunk_start_offset + last.chunk_length // 2])
     from rosbags.highlevel import AnyReaderError
 
     with pytest.raises(AnyReaderError, match="magic"):  # no summary: rosbags refuses it
@@ -161,6 +167,9 @@ def test_a_truncated_log_recovered_reads_in_rosbags(run, tmp_path):
     with AnyReader([fixed]) as reader:
         counts = Counter(c.topic for c, _, _ in reader.messages())
     assert 0 < counts["/joint_states"] < TICKS
+    # the ticks of the complete chunks, every one: those logged before the last chunk's first
+    before = round((last.message_start_time - chunks[0].message_start_time) * 1e-9 * RATE)
+    assert counts["/joint_states"] == before
     assert sum(counts.values()) == saved
     with open(fixed, "rb") as f:
         meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}

@@ -425,6 +425,7 @@ def _write_bag_metadata(bag: Path, recorder, logs) -> None:
 
 def _log_openers(args, scene, sim, duration: float) -> list:
     """The storage checks of the logs asked for, and a function per log that opens it."""
+    from vjm_ros.app.run_outputs import MCAP_CHUNK_SECONDS
     from vjm_ros.logs.opening import recorder_openers
 
     mcap = args.mcap
@@ -442,6 +443,7 @@ def _log_openers(args, scene, sim, duration: float) -> list:
         duration=duration,
         rate=sim.settings.rate,
         keys=("--bag" if args.bag is not None else "--mcap", "--rrd"),
+        chunk_seconds=MCAP_CHUNK_SECONDS,
     )
 
 

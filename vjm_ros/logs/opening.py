@@ -20,6 +20,7 @@ def recorder_openers(
     duration: float = 0.0,
     rate: float = 1000.0,
     keys: tuple[str, str] = ("mcap", "rrd"),
+    chunk_seconds: float | None = None,
 ) -> list[tuple[str, Callable[[], object]]]:
     """The storage checks of the logs asked for, then one function per log that opens it.
 
@@ -39,6 +40,9 @@ def recorder_openers(
         Control ticks per second, Hz.
     keys : tuple of str
         How the two logs are named in error messages (``("--mcap", "--rrd")`` on the command line).
+    chunk_seconds : float, optional
+        Length of the MCAP log's chunks, s of simulated or wall time (the recorder's default when
+        None; see :class:`~vjm_ros.logs.McapRecorder`).
 
     Returns
     -------
@@ -57,11 +61,13 @@ def recorder_openers(
     for key, path, _ in wanted:
         if path and is_file_target(path):
             check_log_path(path, key, duration, rate)
-    return [(key, functools.partial(_open, key, path, cls_name, model, settings, scene_text))
+    return [(key, functools.partial(_open, key, path, cls_name, model, settings, scene_text,
+                                    chunk_seconds))
             for key, path, cls_name in wanted if path]
 
 
-def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_text: str):
+def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_text: str,
+          chunk_seconds: float | None = None):
     """One recorder, opened; a :class:`ConfigurationError` naming ``key`` if it cannot be."""
     try:
         from vjm_ros import logs
@@ -71,8 +77,10 @@ def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_tex
         raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
     args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
         path, model, settings)
+    options = ({"chunk_seconds": chunk_seconds}
+               if cls_name == "McapRecorder" and chunk_seconds is not None else {})
     try:
-        return cls(*args)
+        return cls(*args, **options)
     except (OSError, RuntimeError, ValueError) as exc:
         reason = getattr(exc, "strerror", None) or exc
         raise ConfigurationError(f"{key}: cannot open {path!r} ({reason})") from None
