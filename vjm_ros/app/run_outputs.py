@@ -68,8 +68,8 @@ def preload_libraries(outputs: Sequence[str]) -> threading.Thread:
 
 MCAP_CHUNK_SECONDS = 1.0
 """Chunks of ``vjm run``'s MCAP log, s of simulated time (or of wall time, where the run is
-slower than real time): 730 kB before compression at 1 kHz on the four-bar, the size of
-rosbag2's MCAP chunks by default (768 kB). A run faster than real time crosses a second of
+slower than real time): 0.73 MB before compression at 1 kHz on the four-bar, about the
+chunk size of the C++ MCAP writer that rosbag2's MCAP storage uses (768 KiB by default). A run faster than real time crosses a second of
 simulated time in milliseconds, so a killed ``vjm run`` loses at most its last second of
 simulated time, where the node, live, keeps the recorder's 0.25 s. A quarter of the chunks
 takes a quarter of their fixed costs (indexes, records, calls to the file): the four-bar's 10 s
