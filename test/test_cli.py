@@ -137,6 +137,20 @@ def test_effort_and_flags(tmp_path):
     assert float(rows[-1]["effort.pivot"]) == 1.5
 
 
+def test_run_prints_its_summary_one_key_per_line(tmp_path):
+    """Without --json, the summary's contract keys and the run's costs, one per line, in order."""
+    out = vjm("run", "four_bar", "--duration", "0.05", "--mcap", str(tmp_path / "run.mcap"))
+    assert out.returncode == 0, out.stderr
+    lines = dict(line.split(None, 1) for line in out.stdout.strip().splitlines())
+    assert list(lines) == ["scene", "integrator", "closure", "rate", "substeps", "sim_time",
+                           "wall_time", "cpu_time", "outputs_wait_time", "steps",
+                           "realtime_factor", "max_closure_error", "rms_closure_error",
+                           "energy_drift", "energy_balance_residual", "finite"]
+    assert SUMMARY_KEYS <= set(lines)
+    assert lines["scene"] == "four_bar" and lines["steps"] == "50" and lines["finite"] == "True"
+    assert 0.0 <= float(lines["outputs_wait_time"]) <= float(lines["wall_time"])
+
+
 def test_bad_inputs_exit_2():
     """Unknown scene, wrong effort count and stiff gains are refused before running."""
     out = vjm("run", "no_such_scene")

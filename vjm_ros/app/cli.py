@@ -465,10 +465,15 @@ def _run_info(sim, wall: float, cpu: float, waited: float) -> dict:
             "evaluations": sim.mechanism.evaluations}
 
 
+PRINTED_KEYS = ("scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time",
+                "cpu_time", "outputs_wait_time", "steps", "realtime_factor", "max_closure_error",
+                "rms_closure_error", "energy_drift", "energy_balance_residual", "finite")
+"""Summary keys ``vjm run`` prints without ``--json``, one per line: the contract's keys and the
+run's costs beside ``wall_time`` (its CPU time and the wait for the outputs after the last tick)."""
+
+
 def _print_summary(summary: dict) -> None:
-    keys = ("scene", "integrator", "closure", "rate", "substeps", "sim_time", "wall_time", "steps",
-            "realtime_factor", "max_closure_error", "rms_closure_error", "energy_drift",
-            "energy_balance_residual", "finite")
+    keys = PRINTED_KEYS
     for k in keys:
         v = summary.get(k)
         if isinstance(v, float):
