@@ -312,9 +312,8 @@ def render_fresh(r: dict) -> list[str]:
               "threads' scheduling and the finalization after the last tick.",
               f"- **After the last tick**: {r['wait_ms']['all']:.0f} ms of the best run with all "
               "three logs (its `outputs_wait_time`) went to the blocks the logs had not yet "
-              f"written and to finalizing them, against {r['wait_ms']['physics']:.1f} ms "
-              "without outputs: the logs' threads, on the core the physics leaves them, fall "
-              "behind it while it runs."]
+              "written when the physics ended and to finalizing the logs, against "
+              f"{r['wait_ms']['physics']:.1f} ms without outputs."]
     if "floor" in r:
         f = r["floor"]
         lines += [f"- **The machine's floor**: the run without outputs, with the second core "
