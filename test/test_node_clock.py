@@ -110,14 +110,19 @@ def stop(procs):
     return outputs
 
 
-def run_pair(clock_flags, until):
-    """Start the two simulators with ``publish_clock`` from ``clock_flags``, wait for both to
-    run and then for ``until(probe)``; return the probe's records, the /clock publishers of the
-    graph meanwhile, the return codes and the outputs."""
+def run_pair(clock_flags, until, stagger=0):
+    """Start the two simulators with ``publish_clock`` from ``clock_flags`` (the second once the
+    probe has ``stagger`` joint states of the first, when given), wait for both to run and then
+    for ``until(probe)``; return the probe's records, the /clock publishers of the graph
+    meanwhile, the return codes and the outputs."""
     probe = Probe()
     procs, failure = [], None
     try:
-        procs = [simulator(ns, flag) for ns, flag in zip(ROBOTS, clock_flags, strict=True)]
+        for ns, flag in zip(ROBOTS, clock_flags, strict=True):
+            if procs and stagger:
+                wait_for(lambda: probe.states[ROBOTS[0]] >= stagger, 120.0,
+                         "the first simulator to run")
+            procs.append(simulator(ns, flag))
         # 120 s: a hang guard that also covers compiling the kernels on a first run
         wait_for(lambda: all(probe.states.values()), 120.0, "both simulators to run")
         wait_for(lambda: until(probe), 60.0, "the condition")
@@ -159,12 +164,14 @@ def test_one_clock_publisher_keeps_simulated_time_increasing():
 def test_two_clock_publishers_are_named_by_each_other():
     # Each node warns at its first look at the graph, often before the probe has matched its
     # publisher of ~/events: the event still arrives, from the publisher's transient-local history.
-    # Then 2 s of both clocks (200 ticks each at 100 Hz) for them to interleave.
+    # Then 2 s of both clocks (200 ticks each at 100 Hz) for them to interleave. The second
+    # starts half a simulated second after the first: two clocks started within a tick of each
+    # other can arrive in increasing order although two publishers send them.
     def both_warned(probe):
         return bool(probe.conflicts("/robot1") and probe.conflicts("/robot2")
                      and probe.clock_count() >= 400)
 
-    probe, publishers, codes, outputs = run_pair((True, True), both_warned)
+    probe, publishers, codes, outputs = run_pair((True, True), both_warned, stagger=50)
     assert codes == [0, 0], outputs
     assert publishers == [("/robot1", "vjm_sim_node"), ("/robot2", "vjm_sim_node")]
     for ns, other, out in zip(ROBOTS, reversed(ROBOTS), outputs, strict=True):
