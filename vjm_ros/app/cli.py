@@ -459,8 +459,7 @@ def _run_info(sim, wall: float, cpu: float, waited: float) -> dict:
     outputs: the blocks still queued, the CSV closed, the logs finalized)."""
     steps = sim.ticks * (sim.settings.substeps if sim.integrator.fixed_step else 1)
     return {**sim.describe(), "wall_time": wall, "cpu_time": cpu, "outputs_wait_time": waited,
-            "ticks": sim.ticks,
-            "steps": steps,
+            "ticks": sim.ticks, "steps": steps,
             "realtime_factor": (sim.t / wall) if wall > 0 else float("inf"),
             "evaluations": sim.mechanism.evaluations}
 
@@ -473,8 +472,7 @@ run's costs beside ``wall_time`` (its CPU time and the wait for the outputs afte
 
 
 def _print_summary(summary: dict) -> None:
-    keys = PRINTED_KEYS
-    for k in keys:
+    for k in PRINTED_KEYS:
         v = summary.get(k)
         if isinstance(v, float):
             v = f"{v:.6g}"
