@@ -67,16 +67,16 @@ def preload_libraries(outputs: Sequence[str]) -> threading.Thread:
 
 
 MCAP_CHUNK_SECONDS = 1.0
-"""Chunks of ``vjm run``'s MCAP log, s of simulated time (or of wall time, where the run is
-slower than real time): 0.73 MB before compression at 1 kHz on the four-bar, about the chunk
-size of the C++ MCAP writer that rosbag2's MCAP storage uses (768 KiB by default). A run faster
-than real time crosses a second of simulated time in milliseconds, so a killed ``vjm run``
-loses at most its last second of simulated time, where the node, live, keeps the recorder's
-0.25 s. A quarter of the chunks takes a quarter of their fixed costs (indexes, records, calls
-to the file): the four-bar's 10 s log, written in one thread alone, 19.3 and 20.4 ms against
-22.1 and 25.4 ms (medians of 20, two runs each); ``vjm run four_bar --integrator rk4 --closure exact --duration 10 --out --mcap
---rrd``, fresh processes, 50 rounds paired with 0.25 s chunks: ``wall_time`` shorter in 33,
-geometric mean of the ratios 0.94, median ``cpu_time`` ratio 0.94."""
+"""Chunks of ``vjm run``'s MCAP log, s of simulated time (or of wall time, where the run is slower
+than real time): 0.73 MB before compression at 1 kHz on the four-bar, about the chunk size of
+the C++ MCAP writer that rosbag2's MCAP storage uses (768 KiB by default). A run faster than
+real time crosses a second of simulated time in milliseconds, so a killed ``vjm run`` loses at
+most its last second of simulated time, where the node, live, keeps the recorder's 0.25 s. A
+quarter of the chunks takes a quarter of their fixed costs (indexes, records, calls to the
+file): the four-bar's 10 s log, written in one thread alone, 19.3 and 20.4 ms against 22.1 and
+25.4 ms (medians of 20, two runs each); ``vjm run four_bar --integrator rk4 --closure exact
+--duration 10 --out --mcap --rrd``, fresh processes, 50 rounds paired with 0.25 s chunks:
+``wall_time`` shorter in 33, geometric mean of the ratios 0.94, median ``cpu_time`` ratio 0.94."""
 
 
 OWN_THREAD = ("--mcap", "--bag")
