@@ -373,7 +373,8 @@ def render_section(r: dict) -> str:
         "ticks at a time from byte images of each topic, in buffers kept for the whole file, "
         "and compressed per chunk (zstd level -3), every record the bytes rosbags' serializer "
         "writes; rerun receives arrow columns built from whole arrays, one chunk per entity in "
-        "one `send_chunks` every 5000 ticks.",
+        "one `send_chunks` for each equal share of the run's samples, about 5000 each (a 10 s "
+        "run at 1 kHz: two sends of 5001 and 5000).",
         "- The physics runs in one thread, blocks of up to 1000 ticks per compiled call (the "
         "first ones shorter, so that the logs start early) without the GIL; the MCAP log takes "
         "the blocks in a thread of its own, the trajectory and its CSV and the rerun recording "

@@ -150,3 +150,43 @@ def test_columns_are_the_ones_rerun_builds():
         assert ours.component_descriptor() == theirs.component_descriptor()
         assert ours.as_arrow_array().type == theirs.as_arrow_array().type
         assert ours.as_arrow_array().equals(theirs.as_arrow_array())
+
+
+def chunk_rows(path: Path, entity: str) -> list[int]:
+    """Rows of each chunk of ``entity`` in the file, in the order written (one chunk per send)."""
+    return [chunk.num_rows for chunk in RrdReader(path).store().stream()
+            if str(chunk.entity_path) == entity and not chunk.is_static]
+
+
+def test_a_run_of_known_length_sends_equal_shares(run, tmp_path):
+    """Told how many samples will come, the recorder evens its batch out: 400 samples at a batch
+    of 199 go in two sends of 200, not 199 + 199 + 2 (the last send, a few rows whose chunks
+    cost as much as full ones, after the physics has ended). The values are the same."""
+    scene, sim, samples = run
+    paths = {}
+    for told in (None, len(samples)):
+        paths[told] = tmp_path / f"told_{told}.rrd"
+        with RerunRecorder(paths[told], scene.model, sim.describe(), batch=199,
+                           total_samples=told) as rec:
+            for s in samples:
+                rec.write(s)
+    entity = "/series/joints/position"
+    assert chunk_rows(paths[None], entity) == [199, 199, 2]
+    assert chunk_rows(paths[len(samples)], entity) == [200, 200]
+    for path in paths.values():
+        verify(path)
+        times, values = columns(path, entity, "Scalars:scalars")
+        assert len(times) == len(samples)
+        np.testing.assert_array_equal(np.array(values), [s.q for s in samples])  # f64, exact
+
+
+def test_vjm_run_sends_its_rerun_log_in_equal_shares(tmp_path):
+    """``vjm run --duration 10 --rrd`` writes 10 001 samples at 1 kHz in two sends, 5001 and
+    5000 rows, with no send of a single sample at the close."""
+    from vjm_ros.app import cli
+
+    path = tmp_path / "run.rrd"
+    code = cli.main(["run", "four_bar", "--duration", "10", "--rrd", str(path), "--json"])
+    assert code == 0
+    assert chunk_rows(path, "/series/joints/position") == [5001, 5000]
+    assert chunk_rows(path, "/series/energy") == [5001, 5000]

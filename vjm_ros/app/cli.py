@@ -314,7 +314,7 @@ def _run(args, startup: StopSignals) -> int:
     with StopSignals() as stop:
         stop.code = startup.code  # a signal during start-up: no tick, every log finalized
         try:
-            openers = _log_openers(args, scene, sim, duration)
+            openers = _log_openers(args, scene, sim, duration, ticks + 1)
             first = sim.sample()
             traj.append(first)
             # Blocks of ticks, each one compiled call where the integrator allows it; signals and
@@ -423,8 +423,9 @@ def _write_bag_metadata(bag: Path, recorder, logs) -> None:
         _report_log_failure(where, why)
 
 
-def _log_openers(args, scene, sim, duration: float) -> list:
-    """The storage checks of the logs asked for, and a function per log that opens it."""
+def _log_openers(args, scene, sim, duration: float, samples: int | None = None) -> list:
+    """The storage checks of the logs asked for, and a function per log that opens it
+    (``samples``: how many the run will write, when known)."""
     from vjm_ros.app.run_outputs import MCAP_CHUNK_SECONDS
     from vjm_ros.logs.opening import recorder_openers
 
@@ -444,6 +445,7 @@ def _log_openers(args, scene, sim, duration: float) -> list:
         rate=sim.settings.rate,
         keys=("--bag" if args.bag is not None else "--mcap", "--rrd"),
         chunk_seconds=MCAP_CHUNK_SECONDS,
+        total_samples=samples,
     )
 
 

@@ -21,6 +21,7 @@ def recorder_openers(
     rate: float = 1000.0,
     keys: tuple[str, str] = ("mcap", "rrd"),
     chunk_seconds: float | None = None,
+    total_samples: int | None = None,
 ) -> list[tuple[str, Callable[[], object]]]:
     """The storage checks of the logs asked for, then one function per log that opens it.
 
@@ -43,6 +44,9 @@ def recorder_openers(
     chunk_seconds : float, optional
         Length of the MCAP log's chunks, s of simulated or wall time (the recorder's default when
         None; see :class:`~vjm_ros.logs.McapRecorder`).
+    total_samples : int, optional
+        The samples the run will write, when known, for the rerun log's sends (see
+        :class:`~vjm_ros.logs.RerunRecorder`).
 
     Returns
     -------
@@ -62,12 +66,12 @@ def recorder_openers(
         if path and is_file_target(path):
             check_log_path(path, key, duration, rate)
     return [(key, functools.partial(_open, key, path, cls_name, model, settings, scene_text,
-                                    chunk_seconds))
+                                    chunk_seconds, total_samples))
             for key, path, cls_name in wanted if path]
 
 
 def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_text: str,
-          chunk_seconds: float | None = None):
+          chunk_seconds: float | None = None, total_samples: int | None = None):
     """One recorder, opened; a :class:`ConfigurationError` naming ``key`` if it cannot be."""
     try:
         from vjm_ros import logs
@@ -77,8 +81,10 @@ def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_tex
         raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
     args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
         path, model, settings)
-    options = ({"chunk_seconds": chunk_seconds}
-               if cls_name == "McapRecorder" and chunk_seconds is not None else {})
+    if cls_name == "McapRecorder":
+        options = {} if chunk_seconds is None else {"chunk_seconds": chunk_seconds}
+    else:
+        options = {} if total_samples is None else {"total_samples": total_samples}
     try:
         return cls(*args, **options)
     except (OSError, RuntimeError, ValueError) as exc:

@@ -223,6 +223,16 @@ class RerunRecorder(Recorder):
         Scene YAML for ``run/scene`` (``model.source_text`` when empty).
     recording_id : str, optional
         A fresh UUID when omitted.
+    total_samples : int, optional
+        The samples the run will write, when known (``vjm run``): the batch then becomes an
+        equal share of them, for the number of sends nearest to ``total_samples / batch``, and
+        the last send ends with the run (10 001 samples at a batch of 5000: two sends of 5001,
+        not a third of one sample at the close, whose chunks, one per entity, cost about as
+        much to build and encode as full ones and fall after the physics has ended). ``vjm run
+        four_bar --out --mcap --rrd``, rk4 at 1 kHz, 10 s, fresh processes, two series of 50
+        rounds paired with a batch of 5000: ``wall_time`` shorter in 29 and 28, geometric mean
+        of the ratios 0.971 and 0.985, median ``cpu_time`` 123.5 against 130.1 ms and 120.2
+        against 128.3 ms.
 
     A scene with sensors (``settings["sensors"]``) also logs the measured joint states
     (:data:`MEASURED`) from the samples' ``measured``.
@@ -238,12 +248,16 @@ class RerunRecorder(Recorder):
         batch_seconds: float | None = None,
         scene_text: str = "",
         recording_id: str | None = None,
+        total_samples: int | None = None,
     ):
         self.model = model
         self.settings = dict(settings)
         self.geometry_every = max(int(geometry_every), 1)
         live = str(target) in ("spawn", "connect") or str(target).startswith(VIEWER_SCHEMES)
         self.batch = max(int(batch if batch is not None else (100 if live else 5000)), 1)
+        if total_samples is not None and total_samples > 0:
+            sends = max(round(total_samples / self.batch), 1)
+            self.batch = -(-int(total_samples) // sends)  # the shares, rounded up
         self.batch_seconds = float(
             batch_seconds if batch_seconds is not None else (0.2 if live else 1.0)
         )
