@@ -282,11 +282,28 @@ TARGET = 1.5
 """Issue target: a run with all three logs costs at most this many physics-only runs."""
 
 
+def fresh_verdict(r: dict) -> str:
+    """Whether the run with all logs is within :data:`TARGET` of the run without outputs
+    (figures of :func:`measure_fresh`), counted against the faster of the two series without
+    outputs: the free core's and the busy core's (the floor). A busy-core run faster than the
+    free core's best shows that the machine slowed the free core's series; a ratio to that
+    series alone would then favour the logs."""
+    ratio = r["ratio"]["all"]
+    if ratio > TARGET:
+        return "not met"
+    floor = r.get("floor")
+    if floor is not None and floor["all_ratio"] > TARGET:
+        return (f"not counted as met: the run without outputs beside a busy core was faster "
+                f"({floor['wall_ms']:.0f} ms), and against it the logs take "
+                f"{floor['all_ratio']:.2f}x")
+    return "met"
+
+
 def render_fresh(r: dict) -> list[str]:
     """Lines of the fresh-process table (figures of :func:`measure_fresh`)."""
     names = {"physics": "no output", "+csv": "`--out` (CSV, summary)", "+mcap": "`--mcap`",
              "+rrd": "`--rrd`", "all": "`--out --mcap --rrd`"}
-    verdict = "met" if r["ratio"]["all"] <= TARGET else "not met"
+    verdict = fresh_verdict(r)
     lines = [
         f"A fresh `vjm run {r['scene']} --integrator rk4 --closure exact --duration "
         f"{r['seconds']:g}` process per run, as a user runs it, best of {r['rounds']} "

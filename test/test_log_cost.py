@@ -84,3 +84,27 @@ def test_preloaded_libraries_are_imported_before_the_run_starts():
               "'vjm_ros.logs.mcap_recorder', 'rerun')))\n")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["True"]
+
+
+def _figures(physics: float, all_logs: float, busy: float | None) -> dict:
+    """Figures shaped as :func:`log_cost.measure_fresh` returns them, for the verdict."""
+    r = {"ratio": {"physics": 1.0, "all": all_logs / physics}}
+    if busy is not None:
+        r["floor"] = {"wall_ms": busy, "ratio": busy / physics, "all_ratio": all_logs / busy}
+    return r
+
+
+@pytest.mark.parametrize(("physics", "all_logs", "busy", "verdict"), [
+    (36.0, 53.0, 37.0, "met"),         # 1.47x, the busy core slower: the free core's best holds
+    (36.0, 53.0, None, "met"),         # no floor measured (in-process figures)
+    (36.0, 56.0, 35.0, "not met"),     # 1.56x
+    (43.0, 56.0, 37.0, "not counted"),  # 1.30x, but 1.51x the faster busy-core run
+])
+def test_the_verdict_counts_against_the_faster_run_without_outputs(physics, all_logs, busy,
+                                                                    verdict):
+    """A physics series the machine slowed would favour the logs: the busy-core run, also
+    without outputs, faster than the free core's best, is the reference instead."""
+    text = log_cost.fresh_verdict(_figures(physics, all_logs, busy))
+    assert text.startswith(verdict)
+    if verdict == "not counted":
+        assert "37 ms" in text and "1.51x" in text
