@@ -79,12 +79,11 @@ def _open(key: str, path, cls_name: str, model: Model, settings: dict, scene_tex
         cls = getattr(logs, cls_name)
     except (ImportError, AttributeError) as exc:
         raise ConfigurationError(f"{key}: {cls_name} is not available ({exc})") from None
-    args = (path, model, settings, scene_text) if cls_name == "McapRecorder" else (
-        path, model, settings)
     if cls_name == "McapRecorder":
-        options = {} if chunk_seconds is None else {"chunk_seconds": chunk_seconds}
+        args, options = (path, model, settings, scene_text), {"chunk_seconds": chunk_seconds}
     else:
-        options = {} if total_samples is None else {"total_samples": total_samples}
+        args, options = (path, model, settings), {"total_samples": total_samples}
+    options = {k: v for k, v in options.items() if v is not None}  # None: the default
     try:
         return cls(*args, **options)
     except (OSError, RuntimeError, ValueError) as exc:
