@@ -197,6 +197,16 @@ def test_the_other_publishers_of_clock_are_told_from_the_nodes_own():
     assert rivals([("/robot2", "vjm_sim_node")], own) == ["/robot2/vjm_sim_node"]
 
 
+def test_a_publisher_whose_node_is_not_yet_discovered_is_named_once_it_is():
+    # What the graph lists for a publisher discovered before its node (seen in this suite: a
+    # warning that named "_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_" and never the node).
+    own = ("/robot1", "vjm_sim_node")
+    unknown = ("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
+    assert rivals([own, unknown], own) == []
+    assert rivals([unknown, ("/", "player"), own], own) == ["/player"]
+    assert rivals([own, ("/robot2", "vjm_sim_node")], own) == ["/robot2/vjm_sim_node"]
+
+
 def load_launch(name):
     namespace = {}
     source = (ROOT / "launch" / name).read_text()

@@ -10,7 +10,8 @@ of a graph may publish it; the others run with ``publish_clock:=false``, and the
 closed by the tick loop's thread, the only one that publishes on it) and, every
 :data:`CHECK_PERIOD` seconds in the executor's thread (never in a tick), looks up the other
 publishers of ``/clock`` in the ROS graph (``get_publishers_info_by_topic``, about 0.1 ms): each
-one that appears is reported once, by name and namespace.
+one that appears is reported once, by name and namespace, from the first look at which the graph
+knows its node (discovery can show a publisher before the node that holds it).
 """
 
 from __future__ import annotations
@@ -33,6 +34,9 @@ CHECK_PERIOD = 1.0
 """Seconds (steady clock) between two looks at the other publishers of ``/clock``."""
 CONFLICT = "clock_conflict"
 """Kind of the notice that names another publisher of ``/clock``."""
+UNKNOWN_NODE = ("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
+"""Namespace and name the graph gives the node of a publisher it has discovered before that node
+(rmw_dds_common's graph cache, in Humble, Jazzy and Kilted alike): not a name to report."""
 
 
 def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[str]:
@@ -50,9 +54,11 @@ def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[
     -------
     list of str
         Sorted full names (``/ns/name``; ``/name`` in the root namespace), one per other
-        publisher.
+        publisher whose node the graph knows (one it does not, :data:`UNKNOWN_NODE`, is left
+        out until it does).
     """
-    count = Counter(publishers)
+    count = Counter(p for p in publishers
+                    if p[0] != UNKNOWN_NODE[0] and p[1] != UNKNOWN_NODE[1])
     if count[own]:
         count[own] -= 1
     return sorted(f"{ns.rstrip('/')}/{name}" for (ns, name), k in count.items() for _ in range(k))
