@@ -27,7 +27,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from waiting import nanoseconds, wait_for
 
-from vjm_ros.ros.clock_owner import rivals  # noqa: E402
+from vjm_ros.ros.clock_owner import UNNAMED, RivalWatch, rivals  # noqa: E402
 from vjm_ros.ros.runtime import Spinner  # noqa: E402
 
 DOMAIN = int(os.environ["ROS_DOMAIN_ID"])
@@ -197,14 +197,29 @@ def test_the_other_publishers_of_clock_are_told_from_the_nodes_own():
     assert rivals([("/robot2", "vjm_sim_node")], own) == ["/robot2/vjm_sim_node"]
 
 
+OWN = ("/robot1", "vjm_sim_node")
+UNKNOWN = ("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
+"""What the graph lists for a publisher discovered before its node (seen in this suite: a
+warning that named "_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_" and never the node)."""
+
+
 def test_a_publisher_whose_node_is_not_yet_discovered_is_named_once_it_is():
-    # What the graph lists for a publisher discovered before its node (seen in this suite: a
-    # warning that named "_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_" and never the node).
-    own = ("/robot1", "vjm_sim_node")
-    unknown = ("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
-    assert rivals([own, unknown], own) == []
-    assert rivals([unknown, ("/", "player"), own], own) == ["/player"]
-    assert rivals([own, ("/robot2", "vjm_sim_node")], own) == ["/robot2/vjm_sim_node"]
+    assert rivals([OWN, UNKNOWN], OWN) == []
+    assert rivals([UNKNOWN, ("/", "player"), OWN], OWN) == ["/player"]
+    watch = RivalWatch()
+    assert watch.look([OWN, UNKNOWN], OWN) == []  # the graph will name it at the next look
+    assert watch.look([OWN, ("/robot2", "vjm_sim_node")], OWN) == ["/robot2/vjm_sim_node"]
+    assert watch.look([OWN, ("/robot2", "vjm_sim_node")], OWN) == []  # once
+
+
+def test_a_publisher_the_graph_never_names_is_still_reported():
+    watch = RivalWatch()
+    assert watch.look([UNKNOWN, OWN], OWN) == []
+    assert watch.look([UNKNOWN, OWN], OWN) == [UNNAMED]  # a second look: not a discovery lag
+    assert watch.look([UNKNOWN, OWN], OWN) == []
+    assert watch.look([OWN, ("/", "player")], OWN) == ["/player"]  # named at last
+    assert watch.look([OWN], OWN) == []
+    assert watch.look([OWN, ("/", "player")], OWN) == ["/player"]  # gone and back: again
 
 
 def load_launch(name):

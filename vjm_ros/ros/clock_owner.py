@@ -10,8 +10,8 @@ of a graph may publish it; the others run with ``publish_clock:=false``, and the
 closed by the tick loop's thread, the only one that publishes on it) and, every
 :data:`CHECK_PERIOD` seconds in the executor's thread (never in a tick), looks up the other
 publishers of ``/clock`` in the ROS graph (``get_publishers_info_by_topic``, about 0.1 ms): each
-one that appears is reported once, by name and namespace, from the first look at which the graph
-knows its node (discovery can show a publisher before the node that holds it).
+one that appears is reported once (:class:`RivalWatch`), by name and namespace from the first look
+at which the graph knows its node (discovery can show a publisher before the node that holds it).
 """
 
 from __future__ import annotations
@@ -37,6 +37,13 @@ CONFLICT = "clock_conflict"
 UNKNOWN_NODE = ("_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_")
 """Namespace and name the graph gives the node of a publisher it has discovered before that node
 (rmw_dds_common's graph cache, in Humble, Jazzy and Kilted alike): not a name to report."""
+UNNAMED = "a publisher whose node is not in the graph"
+"""How a rival is reported whose node the graph still does not name at the next look (a DDS
+participant that is not a ROS node, for one)."""
+
+
+def _unnamed(publisher: tuple[str, str]) -> bool:
+    return publisher[0] == UNKNOWN_NODE[0] or publisher[1] == UNKNOWN_NODE[1]
 
 
 def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[str]:
@@ -57,11 +64,33 @@ def rivals(publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[
         publisher whose node the graph knows (one it does not, :data:`UNKNOWN_NODE`, is left
         out until it does).
     """
-    count = Counter(p for p in publishers
-                    if p[0] != UNKNOWN_NODE[0] and p[1] != UNKNOWN_NODE[1])
+    count = Counter(p for p in publishers if not _unnamed(p))
     if count[own]:
         count[own] -= 1
     return sorted(f"{ns.rstrip('/')}/{name}" for (ns, name), k in count.items() for _ in range(k))
+
+
+class RivalWatch:
+    """Which other publishers of ``/clock`` to report at each look at the graph: each one once,
+    by name from the first look at which the graph names its node, or as :data:`UNNAMED` when
+    the graph does not name it at two looks in a row."""
+
+    def __init__(self) -> None:
+        self._reported: frozenset[str] = frozenset()
+        self._unnamed_before = False
+
+    def look(self, publishers: Iterable[tuple[str, str]], own: tuple[str, str]) -> list[str]:
+        """The rivals to report now (sorted), from this look's publishers of ``/clock``
+        (``(namespace, name)`` of the node of each, as :func:`rivals` takes them)."""
+        publishers = list(publishers)
+        found = rivals(publishers, own)
+        unnamed = any(_unnamed(p) for p in publishers)
+        if unnamed and self._unnamed_before:
+            found.append(UNNAMED)
+        self._unnamed_before = unnamed
+        new = sorted(set(found) - self._reported)
+        self._reported = frozenset(found)
+        return new
 
 
 class ClockOwner:
@@ -83,7 +112,7 @@ class ClockOwner:
         self.publisher = None
         self.send: Callable[[bytes], None] | None = None
         """Publish one serialized ``rosgraph_msgs/Clock``; None while closed."""
-        self._reported: frozenset[str] = frozenset()
+        self._watch = RivalWatch()
         if publish:
             self.open()
         self._timer = node.create_timer(CHECK_PERIOD, self.check,
@@ -107,14 +136,12 @@ class ClockOwner:
         """Report each other publisher of ``/clock`` that appeared since the last look (only
         while this node publishes it)."""
         if self.send is None:
-            self._reported = frozenset()
+            self._watch = RivalWatch()
             return
         node = self._node
-        found = rivals(((i.node_namespace, i.node_name)
-                        for i in node.get_publishers_info_by_topic(TOPIC)),
-                       (node.get_namespace(), node.get_name()))
-        new = sorted(set(found) - self._reported)
-        self._reported = frozenset(found)
+        new = self._watch.look(((i.node_namespace, i.node_name)
+                                for i in node.get_publishers_info_by_topic(TOPIC)),
+                               (node.get_namespace(), node.get_name()))
         if new:
             self._notice(CONFLICT, (
                 f"/clock is also published by {', '.join(new)}: subscribers would see "
