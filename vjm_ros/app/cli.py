@@ -423,9 +423,9 @@ def _write_bag_metadata(bag: Path, recorder, logs) -> None:
         _report_log_failure(where, why)
 
 
-def _log_openers(args, scene, sim, duration: float, samples: int | None = None) -> list:
+def _log_openers(args, scene, sim, duration: float, samples: int) -> list:
     """The storage checks of the logs asked for, and a function per log that opens it
-    (``samples``: how many the run will write, when known)."""
+    (``samples``: how many the run will write)."""
     from vjm_ros.app.run_outputs import MCAP_CHUNK_SECONDS
     from vjm_ros.logs.opening import recorder_openers
 
