@@ -23,7 +23,9 @@ A first round, not counted, loads the compiled code and the log libraries. Wall 
 shared 2-core machine vary 2-4x from run to run: compare the ratios of one run. ``--json`` prints
 the figures as one JSON object; ``--parts`` adds the parts of one profiled run with all logs
 (physics, CSV, MCAP encoding, records and indexes, chunks and their compression, rerun), as
-shares of that run.
+shares of that run. ``--repeats N`` measures the fresh processes N times over and ends with
+how the figures spread from one measure to the next (:func:`spread`): on a shared machine one
+measure of a few rounds can fall on either side of the target.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import io
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -299,6 +302,47 @@ def fresh_verdict(r: dict) -> str:
     return "met"
 
 
+def spread(results: list[dict]) -> dict:
+    """How repeated measures of :func:`measure_fresh` (of the same code, one after the other)
+    differ: the ratio of the run with all logs to the run without outputs, the two-core bound,
+    the ratio to the machine's floor and the CPU time of the runs without and with all logs.
+
+    Returns
+    -------
+    dict
+        ``repeats``; ``met``: how many measures :func:`fresh_verdict` counts as met; ``ratio``,
+        ``two_cores``, ``floor_ratio`` (ratios), ``cpu_physics_ms`` and ``cpu_all_ms`` (ms),
+        each ``(least, median, largest)`` over the measures.
+    """
+    def triple(values: list[float]) -> tuple[float, float, float]:
+        return min(values), statistics.median(values), max(values)
+
+    return {
+        "repeats": len(results),
+        "met": sum(fresh_verdict(r) == "met" for r in results),
+        "ratio": triple([r["ratio"]["all"] for r in results]),
+        "two_cores": triple([r["two_cores"] for r in results]),
+        "floor_ratio": triple([r["floor"]["all_ratio"] for r in results]),
+        "cpu_physics_ms": triple([r["cpu_ms"]["physics"] for r in results]),
+        "cpu_all_ms": triple([r["cpu_ms"]["all"] for r in results]),
+    }
+
+
+def render_spread(s: dict) -> list[str]:
+    """Lines saying how the repeated measures spread (figures of :func:`spread`)."""
+    def span(key: str, unit: str = "x", digits: int = 2) -> str:
+        lo, mid, hi = s[key]
+        return f"{lo:.{digits}f}{unit} to {hi:.{digits}f}{unit}, median {mid:.{digits}f}{unit}"
+
+    return [
+        f"{s['repeats']} measures: all logs / no output {span('ratio')} "
+        f"(target {TARGET:g}x met in {s['met']} of {s['repeats']})",
+        f"  two-core bound {span('two_cores')}; all logs / floor {span('floor_ratio')}",
+        f"  cpu_time without outputs {span('cpu_physics_ms', ' ms', 1)}; "
+        f"with all logs {span('cpu_all_ms', ' ms', 1)}",
+    ]
+
+
 def render_fresh(r: dict) -> list[str]:
     """Lines of the fresh-process table (figures of :func:`measure_fresh`)."""
     names = {"physics": "no output", "+csv": "`--out` (CSV, summary)", "+mcap": "`--mcap`",
@@ -423,6 +467,23 @@ def render_section(r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _print_fresh(fresh: dict) -> None:
+    """Print the table of one fresh-process measure (figures of :func:`measure_fresh`)."""
+    print(f"{fresh['scene']}, rk4 1 kHz exact, {fresh['seconds']:g} s, fresh processes, "
+          f"best of {fresh['rounds']} rounds; 1-minute load average {fresh['load']}")
+    print(f"{'outputs':10s} {'wall_time ms':>13s} {'/ none':>7s} {'after last':>11s} "
+          f"{'elapsed ms':>11s} {'/ none':>7s} {'cpu_time ms':>12s}")
+    for c in CONFIGS:
+        print(f"{c:10s} {fresh['wall_ms'][c]:13.1f} {fresh['ratio'][c]:7.2f} "
+              f"{fresh['wait_ms'][c]:11.1f} {fresh['elapsed_ms'][c]:11.0f} "
+              f"{fresh['elapsed_ratio'][c]:7.2f} {fresh['cpu_ms'][c]:12.1f}")
+    floor = fresh["floor"]
+    print(f"{'busy core':10s} {floor['wall_ms']:13.1f} {floor['ratio']:7.2f}   (floor: the "
+          f"physics beside a busy core; all / floor {floor['all_ratio']:.2f})")
+    print(f"{'two cores':10s} {'':13s} {fresh['two_cores']:7.2f}   (the least the run with all "
+          "logs can take: its cpu_time spread over two cores)")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line entry: measure and print the table (or JSON)."""
     from vjm_ros.jit import tiers
@@ -439,25 +500,31 @@ def main(argv: list[str] | None = None) -> int:
                    help="also profile one run with all logs and print its parts")
     p.add_argument("--docs", type=Path, metavar="FILE",
                    help="write the figures as a section of FILE (e.g. docs/accuracy.md)")
+    p.add_argument("--repeats", type=int, default=1, metavar="N",
+                   help="measure the fresh processes N times and say how the measures spread")
     args = p.parse_args(argv)
+    if args.repeats < 1:
+        p.error(f"--repeats: expected a whole number of at least 1, found {args.repeats}")
+    if args.repeats > 1 and (args.in_process or args.parts or args.docs is not None):
+        p.error("--repeats: only for the fresh processes' measure, without --in-process, "
+                "--parts and --docs")
+    if args.repeats > 1:
+        runs = []
+        for _ in range(args.repeats):
+            runs.append(measure_fresh(args.scene, args.seconds, args.rounds))
+            if not args.json:
+                _print_fresh(runs[-1])
+        if args.json:
+            print(json.dumps({"measures": runs, "spread": spread(runs)}))
+        else:
+            print("\n".join(render_spread(spread(runs))))
+        return 0
     if not args.in_process:
         fresh = measure_fresh(args.scene, args.seconds, args.rounds)
         if args.json:
             print(json.dumps(fresh))
             return 0
-        print(f"{fresh['scene']}, rk4 1 kHz exact, {fresh['seconds']:g} s, fresh processes, "
-              f"best of {fresh['rounds']} rounds; 1-minute load average {fresh['load']}")
-        print(f"{'outputs':10s} {'wall_time ms':>13s} {'/ none':>7s} {'after last':>11s} "
-              f"{'elapsed ms':>11s} {'/ none':>7s} {'cpu_time ms':>12s}")
-        for c in CONFIGS:
-            print(f"{c:10s} {fresh['wall_ms'][c]:13.1f} {fresh['ratio'][c]:7.2f} "
-                  f"{fresh['wait_ms'][c]:11.1f} {fresh['elapsed_ms'][c]:11.0f} "
-                  f"{fresh['elapsed_ratio'][c]:7.2f} {fresh['cpu_ms'][c]:12.1f}")
-        floor = fresh["floor"]
-        print(f"{'busy core':10s} {floor['wall_ms']:13.1f} {floor['ratio']:7.2f}   (floor: the "
-              f"physics beside a busy core; all / floor {floor['all_ratio']:.2f})")
-        print(f"{'two cores':10s} {'':13s} {fresh['two_cores']:7.2f}   (the least the run with all "
-              "logs can take: its cpu_time spread over two cores)")
+        _print_fresh(fresh)
         if args.docs is None and not args.parts:
             return 0
     r = measure(args.scene, args.seconds, args.rounds)

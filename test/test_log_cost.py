@@ -108,3 +108,39 @@ def test_the_verdict_counts_against_the_faster_run_without_outputs(physics, all_
     assert text.startswith(verdict)
     if verdict == "not counted":
         assert "37 ms" in text and "1.51x" in text
+
+
+def _measure(physics: float, all_logs: float, busy: float, cpu_physics: float,
+             cpu_all: float) -> dict:
+    """One measure shaped as :func:`log_cost.measure_fresh` returns it, for :func:`spread`."""
+    r = _figures(physics, all_logs, busy)
+    r["cpu_ms"] = {"physics": cpu_physics, "all": cpu_all}
+    r["two_cores"] = max(1.0, cpu_all / 2 / physics)
+    return r
+
+
+def test_repeated_measures_are_summed_up_by_their_spread_and_verdicts():
+    """Three measures of the same code: one met, one not counted (a faster busy-core run), one
+    not met; each figure's least, median and largest, and the verdicts counted."""
+    runs = [_measure(36.0, 50.0, 37.0, 38.0, 90.0),   # 1.39x, floor 1.35x: met
+            _measure(43.0, 56.0, 37.0, 45.0, 100.0),  # 1.30x, but 1.51x the busy core's
+            _measure(34.0, 70.0, 36.0, 36.0, 130.0)]  # 2.06x: not met
+    s = log_cost.spread(runs)
+    assert s["repeats"] == 3 and s["met"] == 1
+    assert s["ratio"] == pytest.approx((56 / 43, 50 / 36, 70 / 34))
+    assert s["floor_ratio"] == pytest.approx((50 / 37, 56 / 37, 70 / 36))
+    assert s["two_cores"] == pytest.approx((100 / 86, 90 / 72, 130 / 68))
+    assert s["cpu_physics_ms"] == (36.0, 38.0, 45.0) and s["cpu_all_ms"] == (90.0, 100.0, 130.0)
+    lines = log_cost.render_spread(s)
+    assert lines[0] == ("3 measures: all logs / no output 1.30x to 2.06x, median 1.39x "
+                        "(target 1.5x met in 1 of 3)")
+    assert "cpu_time without outputs 36.0 ms to 45.0 ms, median 38.0 ms" in lines[2]
+
+
+@pytest.mark.parametrize("argv", [["--repeats", "0"], ["--repeats", "2", "--parts"],
+                                  ["--repeats", "3", "--docs", "page.md"]])
+def test_repeats_is_refused_where_it_means_nothing(argv, capsys):
+    with pytest.raises(SystemExit) as stop:
+        log_cost.main(argv)
+    assert stop.value.code == 2
+    assert "--repeats" in capsys.readouterr().err
