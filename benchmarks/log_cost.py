@@ -505,10 +505,10 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.repeats < 1:
         p.error(f"--repeats: expected a whole number of at least 1, found {args.repeats}")
-    if args.repeats > 1 and (args.in_process or args.parts or args.docs is not None):
-        p.error("--repeats: only for the fresh processes' measure, without --in-process, "
-                "--parts and --docs")
     if args.repeats > 1:
+        if args.in_process or args.parts or args.docs is not None:
+            p.error("--repeats: only for the fresh processes' measure, without --in-process, "
+                    "--parts and --docs")
         runs = []
         for _ in range(args.repeats):
             runs.append(measure_fresh(args.scene, args.seconds, args.rounds))
